@@ -1,0 +1,2 @@
+//! The sensor controller's logic.
+#![no_std]

@@ -1,0 +1,1 @@
+//! hil-sim: the emulated bench.

@@ -1,0 +1,2 @@
+//! The host side of the video-tactile indentation sensor: everything behind the `tactile`
+//! command lives here, `main.rs` only parses arguments and reports errors.
