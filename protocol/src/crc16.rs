@@ -69,7 +69,11 @@ mod tests {
     fn table_matches_bitwise_definition() {
         let data: [u8; 300] = core::array::from_fn(|i| (i as u8).wrapping_mul(37) ^ 0x5a);
         for len in [0, 1, 2, 7, 64, 299, 300] {
-            assert_eq!(crc16(&data[..len]), crc16_bitwise(&data[..len]), "len {len}");
+            assert_eq!(
+                crc16(&data[..len]),
+                crc16_bitwise(&data[..len]),
+                "len {len}"
+            );
         }
     }
 }

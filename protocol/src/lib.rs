@@ -13,7 +13,7 @@ pub mod frame;
 pub mod messages;
 
 pub use frame::{
-    DELIMITER, EncodeError, FrameDecoder, FrameError, MAX_FRAME_LEN, MAX_PAYLOAD_LEN, Frames,
+    DELIMITER, EncodeError, FrameDecoder, FrameError, Frames, MAX_FRAME_LEN, MAX_PAYLOAD_LEN,
     decode_frame, encode_frame,
 };
 pub use messages::*;

@@ -113,6 +113,9 @@ impl ChannelSet {
 /// Device -> host messages.
 ///
 /// Variant order is part of the wire format: append new variants at the end only.
+// A sample block is much larger than the other variants, but without an allocator there is
+// nothing to box it into; a message lives only between its decoder and its consumer.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum DeviceMessage {
@@ -135,7 +138,10 @@ pub enum Reply {
     /// Answer to [`Request::Hello`].
     Info(DeviceInfo),
     /// Answer to [`Request::Ping`]: the host's time echoed and the device time at reception.
-    Pong { host_time_us: u64, device_time_us: u64 },
+    Pong {
+        host_time_us: u64,
+        device_time_us: u64,
+    },
     /// Answer to [`Request::GetStatus`].
     Status(Status),
     /// Answer to [`Request::ClearFault`]: faults still latched because their cause persists.
