@@ -1,0 +1,36 @@
+#!/usr/bin/env bash
+# The whole test suite: formatting, lints, the no_std checks, every test of the workspace,
+# and the RP2040 firmware's release build with its size budget. This is what CI runs.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+step() { printf '\n==> %s\n' "$*"; }
+start=$(date +%s)
+
+step "cargo fmt --check (host workspace)"
+cargo fmt --all --check
+if [ -f firmware/rp2040/Cargo.toml ]; then
+    step "cargo fmt --check (firmware/rp2040)"
+    (cd firmware/rp2040 && cargo fmt --check)
+fi
+
+step "no_std: protocol and firmware for thumbv6m-none-eabi"
+cargo check -p protocol -p firmware --target thumbv6m-none-eabi
+cargo check -p protocol --features defmt --target thumbv6m-none-eabi
+
+step "cargo clippy (host workspace)"
+cargo clippy --workspace --all-targets -- -D warnings
+
+step "cargo test --workspace"
+cargo test --workspace
+
+if [ -f firmware/rp2040/Cargo.toml ]; then
+    step "firmware/rp2040: clippy and release build"
+    (cd firmware/rp2040 && cargo clippy --release -- -D warnings && cargo build --release)
+    if [ -x scripts/check-firmware-size.sh ]; then
+        step "firmware/rp2040: size budget"
+        scripts/check-firmware-size.sh
+    fi
+fi
+
+printf '\nAll checks passed in %ss.\n' "$(( $(date +%s) - start ))"
