@@ -28,17 +28,23 @@ use crate::stage::Stage;
 use crate::stream::{Streamer, TickSample};
 
 /// Default pressure PID gains, tuned on the pneumatic plant of the host tests
-/// (`tests/support/plant.rs`: 3 mL, 200 mL/min pump, ~0.4 s open-loop time constant):
-/// about 30 rad/s crossover. The host replaces them with `SetPidGains` for its own bench.
+/// (`tests/support/plant.rs`: 3 mL of gas, 200 mL/min pump with a 30 ms spin-up lag, plant
+/// gain ~110 kPa/s per unit duty, leak pole ~2.6 /s) by a grid search over kp, ki, kd and
+/// the slew rate for the shortest 2 % settling at 6 and 15 kPa with < 2.5 % overshoot.
+/// The plant is nearly an integrator, so the integral is kept small (its zero at ~1 rad/s,
+/// far below the ~60 rad/s crossover) and the feed-forward (the holding duty per kPa)
+/// carries the steady state; the derivative supplies the phase the pump's lag takes.
+/// The host replaces them with `SetPidGains` for its own bench.
 pub const DEFAULT_GAINS: PidGains = PidGains {
-    kp: 0.3,
-    ki: 3.0,
-    kd: 0.001,
+    kp: 0.6,
+    ki: 0.5,
+    kd: 0.01,
     feed_forward_per_kpa: 0.018,
 };
 
-/// Default setpoint slew rate (a 0 -> 15 kPa step ramps in 0.3 s).
-pub const DEFAULT_SETPOINT_SLEW_KPA_PER_S: f32 = 50.0;
+/// Default setpoint slew rate (a 0 -> 15 kPa step ramps in 0.15 s, about the plant's own
+/// full-duty rise time, so it costs little settling time but removes the proportional kick).
+pub const DEFAULT_SETPOINT_SLEW_KPA_PER_S: f32 = 100.0;
 
 /// Per-device settings of the controller.
 #[derive(Debug, Clone, PartialEq)]
