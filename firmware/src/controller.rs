@@ -11,7 +11,7 @@
 
 use heapless::String;
 use protocol::{
-    DeviceInfo, DeviceMessage, FaultFlags, FaultReport, FIRMWARE_VERSION_LEN, PROTOCOL_VERSION,
+    DeviceInfo, DeviceMessage, FIRMWARE_VERSION_LEN, FaultFlags, FaultReport, PROTOCOL_VERSION,
     PidGains, PressureMode, SERIAL_LEN, Status, StatusFlags,
 };
 

@@ -149,7 +149,9 @@ impl Controller {
                 Ok(Reply::Done)
             }
             Request::SetStagePosition { position_steps } => {
-                self.stage.set_position(position_steps).map_err(stage_nack)?;
+                self.stage
+                    .set_position(position_steps)
+                    .map_err(stage_nack)?;
                 Ok(Reply::Done)
             }
             Request::ClearFault => Ok(Reply::FaultsRemaining(self.safety.clear())),

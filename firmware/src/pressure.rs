@@ -126,8 +126,8 @@ impl PressureControl {
     /// Runs the PID when its period is due; returns the pump duty fraction to apply.
     pub fn tick(&mut self, now_us: u64, measured_kpa: f32) -> f32 {
         if self.mode == PressureMode::Regulating && now_us >= self.next_control_us {
-            let dt_s = (now_us.saturating_sub(self.last_control_us) as f32 * 1e-6)
-                .min(MAX_CONTROL_DT_S);
+            let dt_s =
+                (now_us.saturating_sub(self.last_control_us) as f32 * 1e-6).min(MAX_CONTROL_DT_S);
             self.last_control_us = now_us;
             self.next_control_us += u64::from(CONTROL_PERIOD_US);
             if self.next_control_us <= now_us {

@@ -133,8 +133,8 @@ impl Supervisor {
     fn causes(&self, now_us: u64, inputs: &SafetyInputs) -> FaultFlags {
         let l = &self.limits;
         let mut causes = 0;
-        let in_range = (l.manometer_min_counts..=l.manometer_max_counts)
-            .contains(&inputs.manometer_counts);
+        let in_range =
+            (l.manometer_min_counts..=l.manometer_max_counts).contains(&inputs.manometer_counts);
         if !in_range {
             causes |= FaultFlags::MANOMETER_RANGE;
         }
@@ -169,7 +169,8 @@ impl Supervisor {
     /// returns the faults that remain latched.
     pub fn clear(&mut self) -> FaultFlags {
         // Heartbeat and watchdog causes are gone by the time a request is being handled.
-        let persisting = self.last_causes.0 & !(FaultFlags::HEARTBEAT_LOST | FaultFlags::WATCHDOG_RESET);
+        let persisting =
+            self.last_causes.0 & !(FaultFlags::HEARTBEAT_LOST | FaultFlags::WATCHDOG_RESET);
         self.latched.0 &= persisting;
         self.latched
     }

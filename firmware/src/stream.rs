@@ -135,6 +135,11 @@ impl Streamer {
         self.proximity.add(tick.proximity_counts);
         self.manometer.add(tick.manometer_counts);
         self.load_fresh |= tick.load_fresh;
+        if !self.block.samples.is_empty()
+            && now_us.saturating_sub(self.block_started_us) >= MAX_BLOCK_LATENCY_US
+        {
+            self.close_block();
+        }
         if now_us >= self.next_due_us {
             self.take_sample(now_us, tick);
             // Next due instant after `now_us` on the exact grid start + k/rate.
@@ -142,11 +147,6 @@ impl Streamer {
             let rate = u64::from(self.rate_hz);
             self.next_index = (self.next_index + 1).max(elapsed * rate / 1_000_000 + 1);
             self.next_due_us = self.start_us + (self.next_index * 1_000_000).div_ceil(rate);
-        }
-        if !self.block.samples.is_empty()
-            && now_us.saturating_sub(self.block_started_us) >= MAX_BLOCK_LATENCY_US
-        {
-            self.close_block();
         }
     }
 

@@ -88,7 +88,10 @@ fn setpoint_change_6_to_15_kpa_is_bumpless() {
     let jump = (i32::from(out.pump_duty_per_10k) - i32::from(duty_before)).abs();
     assert!(jump <= 800, "duty jumped by {jump}/10000");
     let r = step_response(&mut bench, 15.0);
-    println!("step 6 -> 15 kPa: settling {:.3} s, overshoot {:.2} %", r.settling_s, r.overshoot_pct);
+    println!(
+        "step 6 -> 15 kPa: settling {:.3} s, overshoot {:.2} %",
+        r.settling_s, r.overshoot_pct
+    );
     assert!(r.settling_s <= 0.5 && r.overshoot_pct <= 5.0);
 }
 
@@ -109,7 +112,11 @@ fn proportional_only_misses_the_band() {
     let r = step_response(&mut bench, 6.0);
     // Offset = holding duty / Kp = 0.1 / 0.6 kPa = 0.17 kPa = 2.8 % of 6 kPa.
     let expected_offset = bench.plant.holding_duty(r.final_kpa) / f64::from(DEFAULT_GAINS.kp);
-    assert!(((6.0 - r.final_kpa) - expected_offset).abs() < 0.05, "{}", r.final_kpa);
+    assert!(
+        ((6.0 - r.final_kpa) - expected_offset).abs() < 0.05,
+        "{}",
+        r.final_kpa
+    );
     assert!(r.settling_s > 1.0);
 }
 

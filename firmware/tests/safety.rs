@@ -48,7 +48,10 @@ fn overpressure_stops_pump_and_opens_vent_in_the_same_tick() {
             load_counts: None,
         },
     );
-    assert_eq!(out.pump_duty_per_10k, 0, "pump must stop in the tripping tick");
+    assert_eq!(
+        out.pump_duty_per_10k, 0,
+        "pump must stop in the tripping tick"
+    );
     assert!(out.vent_open, "vent must open in the tripping tick");
     assert!(bench.ctl.faults().contains(FaultFlags::OVERPRESSURE));
     assert_eq!(bench.ctl.pressure_mode(), PressureMode::Off);
@@ -232,7 +235,10 @@ fn heartbeat_is_not_armed_before_the_first_request() {
 fn load_cell_timeout_is_armed_by_the_first_conversion() {
     let mut bench = Bench::new();
     bench.run_quiet_ms(2000);
-    assert!(bench.ctl.faults().is_empty(), "no load cell fitted: no fault");
+    assert!(
+        bench.ctl.faults().is_empty(),
+        "no load cell fitted: no fault"
+    );
     bench.load_period_us = Some(12_500);
     bench.run_quiet_ms(100);
     bench.load_period_us = None;

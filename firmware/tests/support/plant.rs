@@ -72,8 +72,10 @@ impl PneumaticPlant {
         for _ in 0..n {
             let (p, q) = (self.pressure_kpa, self.pump_speed);
             let (k1p, k1q) = self.derivatives(p, q, duty, vent_open);
-            let (k2p, k2q) = self.derivatives(p + 0.5 * h * k1p, q + 0.5 * h * k1q, duty, vent_open);
-            let (k3p, k3q) = self.derivatives(p + 0.5 * h * k2p, q + 0.5 * h * k2q, duty, vent_open);
+            let (k2p, k2q) =
+                self.derivatives(p + 0.5 * h * k1p, q + 0.5 * h * k1q, duty, vent_open);
+            let (k3p, k3q) =
+                self.derivatives(p + 0.5 * h * k2p, q + 0.5 * h * k2q, duty, vent_open);
             let (k4p, k4q) = self.derivatives(p + h * k3p, q + h * k3q, duty, vent_open);
             self.pressure_kpa = p + h / 6.0 * (k1p + 2.0 * k2p + 2.0 * k3p + k4p);
             self.pump_speed = q + h / 6.0 * (k1q + 2.0 * k2q + 2.0 * k3q + k4q);
