@@ -1,6 +1,24 @@
 //! fem-core: axisymmetric finite-strain frictional contact of the pressurised PDMS shell on a
 //! soft sample, and the lookup tables (LUT) the host fits measured curves against.
+//!
+//! Solver modules, one concept each: [`shape`] (Q9 basis, Gauss rule), [`mesh`] (mapped
+//! structured meshes), [`material`] (neo-Hookean / linear in mixed u–p form), [`element`]
+//! (Q9/P1 condensed mixed element), [`pressure_load`] (follower pressure), [`contact`]
+//! (node-to-segment augmented-Lagrangian contact), [`linear_solver`] (faer sparse Cholesky),
+//! [`model`] (assembly and Newton–Raphson), [`problem`] (the paper's two-stage indentation).
 
+pub mod contact;
 pub mod curve;
+pub mod element;
+pub mod error;
+pub mod linear_solver;
+pub mod material;
+pub mod mesh;
+pub mod model;
+pub mod pressure_load;
+pub mod problem;
+pub mod shape;
 
 pub use curve::{ContactPressureSample, Curve, CurveParams, CurvePoint, MaterialLaw};
+pub use error::FemError;
+pub use problem::{SolverSettings, solve_curve, solve_curve_with};

@@ -1,0 +1,332 @@
+//! Structured, mapped Q9 meshes of the two bodies in the (r, z) half-plane.
+//!
+//! Coordinates: the origin is the centre of the undeformed hemisphere, z points up (towards
+//! the tube), so the shell's outer apex is at (0, -R1) and the sample lies below it.
+//!
+//! - Shell: a (s, t) mapped grid; s runs along the mid-surface from the apex over the
+//!   hemisphere (uniform in the polar angle) and up the cylindrical skirt, t runs through the
+//!   wall from the inner to the outer surface. Nodes are placed on the exact geometry.
+//! - Sample: a rectangle r in [0, R_s], z in [z_top - T, z_top], uniform near the axis and the
+//!   top surface (the contact zone) and geometrically graded away from it.
+
+use crate::shape::q9;
+
+/// One Q9 element: global node numbers in tensor order (see [`crate::shape`]) and its body.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct MeshElement {
+    pub nodes: [usize; 9],
+    pub body: usize,
+}
+
+/// Nodes (reference coordinates, mm) and elements of all bodies.
+#[derive(Debug, Clone, Default)]
+pub struct Mesh {
+    pub nodes: Vec<[f64; 2]>,
+    pub elements: Vec<MeshElement>,
+}
+
+/// A structured block of (2 nx_el + 1) x (2 ny_el + 1) nodes inside a [`Mesh`].
+#[derive(Debug, Clone, Copy)]
+pub struct Block {
+    pub node_offset: usize,
+    /// Nodes along the first grid direction.
+    pub n1: usize,
+    /// Nodes along the second grid direction.
+    pub n2: usize,
+}
+
+impl Block {
+    /// Global node number of grid node (i, j).
+    pub fn node(&self, i: usize, j: usize) -> usize {
+        self.node_offset + j * self.n1 + i
+    }
+}
+
+impl Mesh {
+    /// Append a structured block whose node (i, j) is at `position(i, j)`; elements are
+    /// oriented so that their Jacobian is positive.
+    pub fn add_block(
+        &mut self,
+        n1: usize,
+        n2: usize,
+        body: usize,
+        position: impl Fn(usize, usize) -> [f64; 2],
+    ) -> Block {
+        let block = Block {
+            node_offset: self.nodes.len(),
+            n1,
+            n2,
+        };
+        for j in 0..n2 {
+            for i in 0..n1 {
+                self.nodes.push(position(i, j));
+            }
+        }
+        for ej in 0..(n2 - 1) / 2 {
+            for ei in 0..(n1 - 1) / 2 {
+                let mut nodes = [0; 9];
+                for jj in 0..3 {
+                    for ii in 0..3 {
+                        nodes[3 * jj + ii] = block.node(2 * ei + ii, 2 * ej + jj);
+                    }
+                }
+                if self.parent_jacobian(&nodes) < 0.0 {
+                    // mirror the first parent direction
+                    for jj in 0..3 {
+                        nodes.swap(3 * jj, 3 * jj + 2);
+                    }
+                }
+                self.elements.push(MeshElement { nodes, body });
+            }
+        }
+        block
+    }
+
+    fn parent_jacobian(&self, nodes: &[usize; 9]) -> f64 {
+        let (_, dn) = q9(0.0, 0.0);
+        let mut jac = [[0.0; 2]; 2];
+        for (a, &n) in nodes.iter().enumerate() {
+            for r in 0..2 {
+                for c in 0..2 {
+                    jac[r][c] += self.nodes[n][r] * dn[a][c];
+                }
+            }
+        }
+        jac[0][0] * jac[1][1] - jac[0][1] * jac[1][0]
+    }
+
+    /// Reference coordinates of an element's nodes.
+    pub fn element_coordinates(&self, element: &MeshElement) -> [[f64; 2]; 9] {
+        element.nodes.map(|n| self.nodes[n])
+    }
+}
+
+/// Shell geometry: hemisphere plus cylindrical skirt.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ShellGeometry {
+    pub inner_radius_mm: f64,
+    pub outer_radius_mm: f64,
+    /// Length of the cylindrical skirt above the equator (0: hemisphere only).
+    pub skirt_length_mm: f64,
+}
+
+/// Element counts of the shell mesh.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ShellDivisions {
+    /// Elements along the hemisphere (apex to equator).
+    pub arc: usize,
+    /// Elements along the skirt.
+    pub skirt: usize,
+    /// Elements through the wall.
+    pub thickness: usize,
+}
+
+/// Node sets of the shell needed by loads and boundary conditions.
+#[derive(Debug, Clone)]
+pub struct ShellMesh {
+    pub block: Block,
+    /// Inner-surface nodes of the hemisphere from the apex to the equator.
+    pub inner_surface: Vec<usize>,
+    /// Outer-surface nodes of the hemisphere from the apex to the equator (contact side).
+    pub outer_surface: Vec<usize>,
+    /// Nodes on the symmetry axis (apex line through the wall).
+    pub axis: Vec<usize>,
+    /// Inner skirt nodes (clamped to the tube), equator included; empty without a skirt.
+    pub clamped: Vec<usize>,
+    /// Nodes on the equator plane z = 0 (through the wall).
+    pub equator: Vec<usize>,
+    /// Inner apex node (paper eq. 6).
+    pub inner_apex: usize,
+    /// Outer apex node.
+    pub outer_apex: usize,
+}
+
+/// Build the shell block into `mesh` as body `body`.
+pub fn add_shell(
+    mesh: &mut Mesh,
+    geometry: &ShellGeometry,
+    div: &ShellDivisions,
+    body: usize,
+) -> ShellMesh {
+    let n_arc_nodes = 2 * div.arc + 1;
+    let n1 = n_arc_nodes + 2 * div.skirt;
+    let n2 = 2 * div.thickness + 1;
+    let g = *geometry;
+    let arc = div.arc;
+    let skirt = div.skirt;
+    let block = mesh.add_block(n1, n2, body, |i, j| {
+        let t = g.inner_radius_mm
+            + (g.outer_radius_mm - g.inner_radius_mm) * j as f64 / (n2 - 1) as f64;
+        if i < n_arc_nodes {
+            let phi = std::f64::consts::FRAC_PI_2 * i as f64 / (2 * arc) as f64;
+            if i == 0 {
+                [0.0, -t]
+            } else {
+                [t * phi.sin(), -t * phi.cos()]
+            }
+        } else {
+            let k = i - (n_arc_nodes - 1);
+            [t, g.skirt_length_mm * k as f64 / (2 * skirt) as f64]
+        }
+    });
+    let inner_surface = (0..n_arc_nodes).map(|i| block.node(i, 0)).collect();
+    let outer_surface = (0..n_arc_nodes).map(|i| block.node(i, n2 - 1)).collect();
+    let axis = (0..n2).map(|j| block.node(0, j)).collect();
+    let clamped = if skirt > 0 {
+        (n_arc_nodes - 1..n1).map(|i| block.node(i, 0)).collect()
+    } else {
+        Vec::new()
+    };
+    let equator = (0..n2).map(|j| block.node(n_arc_nodes - 1, j)).collect();
+    ShellMesh {
+        block,
+        inner_surface,
+        outer_surface,
+        axis,
+        clamped,
+        equator,
+        inner_apex: block.node(0, 0),
+        outer_apex: block.node(0, n2 - 1),
+    }
+}
+
+/// Sample geometry and grading.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SampleGeometry {
+    pub radius_mm: f64,
+    pub thickness_mm: f64,
+    /// z of the top surface in the global frame.
+    pub top_z_mm: f64,
+}
+
+/// Element sizes of the sample mesh.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SampleGrading {
+    /// Element size in the contact zone (near the axis, at the top).
+    pub fine_size_mm: f64,
+    /// Radius of the uniformly meshed contact zone.
+    pub fine_radius_mm: f64,
+    /// Depth of the uniformly meshed layer under the top surface.
+    pub fine_depth_mm: f64,
+    /// Geometric growth ratio of element sizes outside the fine zone.
+    pub growth: f64,
+}
+
+/// Node sets of the sample.
+#[derive(Debug, Clone)]
+pub struct SampleMesh {
+    pub block: Block,
+    /// Top-surface nodes ordered by increasing r (the contact surface).
+    pub top: Vec<usize>,
+    pub axis: Vec<usize>,
+    /// Bottom nodes (bonded to the rigid base).
+    pub bottom: Vec<usize>,
+}
+
+/// Element boundaries on [0, length]: uniform of size <= `fine` up to `fine_len`, then
+/// sizes growing geometrically by `growth`; the last element is merged if it would be tiny.
+pub fn graded_edges(length: f64, fine: f64, fine_len: f64, growth: f64) -> Vec<f64> {
+    let fine_len = fine_len.min(length);
+    let n_fine = ((fine_len / fine) - 1e-9).ceil().max(1.0) as usize;
+    let size = fine_len / n_fine as f64;
+    let mut edges: Vec<f64> = (0..=n_fine).map(|k| k as f64 * size).collect();
+    let mut h = size;
+    let mut x = fine_len;
+    while x < length - 1e-12 {
+        h *= growth;
+        if x + h * (1.0 + 0.5 * growth) >= length {
+            edges.push(length);
+            break;
+        }
+        x += h;
+        edges.push(x);
+    }
+    edges
+}
+
+/// Node positions (element edges plus mid points) from element edges.
+fn with_midpoints(edges: &[f64]) -> Vec<f64> {
+    let mut out = Vec::with_capacity(2 * edges.len() - 1);
+    for w in edges.windows(2) {
+        out.push(w[0]);
+        out.push(0.5 * (w[0] + w[1]));
+    }
+    if let Some(&last) = edges.last() {
+        out.push(last);
+    }
+    out
+}
+
+/// Build the sample block into `mesh` as body `body`.
+pub fn add_sample(
+    mesh: &mut Mesh,
+    geometry: &SampleGeometry,
+    grading: &SampleGrading,
+    body: usize,
+) -> SampleMesh {
+    let r_nodes = with_midpoints(&graded_edges(
+        geometry.radius_mm,
+        grading.fine_size_mm,
+        grading.fine_radius_mm,
+        grading.growth,
+    ));
+    // depth below the top surface, then ordered bottom -> top
+    let mut z_nodes: Vec<f64> = with_midpoints(&graded_edges(
+        geometry.thickness_mm,
+        grading.fine_size_mm,
+        grading.fine_depth_mm,
+        grading.growth,
+    ))
+    .into_iter()
+    .map(|d| geometry.top_z_mm - d)
+    .collect();
+    z_nodes.reverse();
+    let n1 = r_nodes.len();
+    let n2 = z_nodes.len();
+    let block = mesh.add_block(n1, n2, body, |i, j| [r_nodes[i], z_nodes[j]]);
+    SampleMesh {
+        block,
+        top: (0..n1).map(|i| block.node(i, n2 - 1)).collect(),
+        axis: (0..n2).map(|j| block.node(0, j)).collect(),
+        bottom: (0..n1).map(|i| block.node(i, 0)).collect(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn graded_edges_cover_the_interval_monotonically() {
+        let e = graded_edges(45.0, 0.1, 4.5, 1.3);
+        assert_eq!(e[0], 0.0);
+        assert!((e[e.len() - 1] - 45.0).abs() < 1e-12);
+        assert!(e.windows(2).all(|w| w[1] > w[0]));
+        assert!((e[1] - 0.1).abs() < 1e-12);
+    }
+
+    #[test]
+    fn shell_elements_have_positive_jacobians() {
+        let mut mesh = Mesh::default();
+        let shell = add_shell(
+            &mut mesh,
+            &ShellGeometry {
+                inner_radius_mm: 4.6,
+                outer_radius_mm: 5.0,
+                skirt_length_mm: 4.0,
+            },
+            &ShellDivisions {
+                arc: 8,
+                skirt: 3,
+                thickness: 2,
+            },
+            0,
+        );
+        for e in &mesh.elements {
+            assert!(mesh.parent_jacobian(&e.nodes) > 0.0);
+        }
+        assert_eq!(mesh.nodes[shell.inner_apex], [0.0, -4.6]);
+        assert_eq!(mesh.nodes[shell.outer_apex], [0.0, -5.0]);
+        assert_eq!(shell.clamped.len(), 7);
+    }
+}

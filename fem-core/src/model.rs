@@ -1,0 +1,317 @@
+//! A discretised boundary-value problem (mesh, materials, Dirichlet conditions, follower
+//! pressure, contact) and its Newton–Raphson solution.
+//!
+//! Unknowns are the nodal displacements (u_r, u_z) in global dof order `2 n`, `2 n + 1`.
+//! Dirichlet dofs are eliminated; their reactions are the internal forces at those dofs.
+//! The residual is `R(u) = f_int(u) + f_contact(u) - p dV/dx(u)` and the tangent its exact
+//! derivative (see the element, pressure-load and contact modules).
+
+use crate::FemError;
+use crate::contact::ContactPair;
+use crate::element::{self, ElementVector, Formulation};
+use crate::linear_solver::{SymmetricSolver, UpperTriplets};
+use crate::material::Material;
+use crate::mesh::Mesh;
+use crate::pressure_load::{edge_volume, enclosed_volume};
+
+/// Newton–Raphson controls.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NewtonSettings {
+    pub max_iterations: usize,
+    /// Converged when ||R_free|| <= relative * ||f_int|| + absolute.
+    pub relative_tolerance: f64,
+    pub absolute_tolerance: f64,
+}
+
+impl Default for NewtonSettings {
+    fn default() -> Self {
+        Self {
+            max_iterations: 30,
+            relative_tolerance: 1e-9,
+            absolute_tolerance: 1e-10,
+        }
+    }
+}
+
+/// Why a Newton solve failed (the caller cuts the step).
+#[derive(Debug, Clone, PartialEq)]
+pub enum NewtonFailure {
+    NotConverged { residual: f64, reference: f64 },
+    InvertedElement,
+    Linear(FemError),
+}
+
+impl std::fmt::Display for NewtonFailure {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::NotConverged {
+                residual,
+                reference,
+            } => write!(f, "residual {residual:.3e} (reference force {reference:.3e})"),
+            Self::InvertedElement => write!(f, "an element inverted (det F <= 0)"),
+            Self::Linear(e) => write!(f, "{e}"),
+        }
+    }
+}
+
+/// Residual and tangent at one state.
+#[derive(Debug, Clone, Default)]
+pub struct Assembly {
+    /// Full residual over all dofs (reactions at Dirichlet dofs).
+    pub residual: Vec<f64>,
+    pub tangent: UpperTriplets,
+    pub min_jacobian: f64,
+    /// Euclidean norm of the internal forces over all dofs (convergence reference).
+    pub force_scale: f64,
+}
+
+/// The discretised problem.
+#[derive(Debug)]
+pub struct Model {
+    pub mesh: Mesh,
+    /// Material of each body (indexed by `MeshElement::body`).
+    pub materials: Vec<Material>,
+    pub formulation: Formulation,
+    /// Equation number of each dof, `None` for Dirichlet dofs.
+    equation: Vec<Option<usize>>,
+    /// Prescribed value of each Dirichlet dof.
+    pub prescribed: Vec<f64>,
+    n_equations: usize,
+    /// Nodes of the pressurised surface from the axis outwards (3-node edges).
+    pub pressure_surface: Vec<usize>,
+    pub contact: Option<ContactPair>,
+    pub newton: NewtonSettings,
+    solver: SymmetricSolver,
+    /// Total Newton iterations performed (diagnostic).
+    pub newton_iterations: usize,
+}
+
+impl Model {
+    pub fn new(mesh: Mesh, materials: Vec<Material>, formulation: Formulation) -> Self {
+        let n_dofs = 2 * mesh.nodes.len();
+        let mut model = Self {
+            mesh,
+            materials,
+            formulation,
+            equation: vec![Some(0); n_dofs],
+            prescribed: vec![0.0; n_dofs],
+            n_equations: 0,
+            pressure_surface: Vec::new(),
+            contact: None,
+            newton: NewtonSettings::default(),
+            solver: SymmetricSolver::default(),
+            newton_iterations: 0,
+        };
+        model.renumber();
+        model
+    }
+
+    pub fn n_dofs(&self) -> usize {
+        self.equation.len()
+    }
+
+    pub fn n_equations(&self) -> usize {
+        self.n_equations
+    }
+
+    fn renumber(&mut self) {
+        let mut next = 0;
+        for e in self.equation.iter_mut() {
+            if e.is_some() {
+                *e = Some(next);
+                next += 1;
+            }
+        }
+        self.n_equations = next;
+    }
+
+    /// Prescribe dof `dof` (= 2 node + component) to `value`.
+    pub fn fix(&mut self, dof: usize, value: f64) {
+        self.equation[dof] = None;
+        self.prescribed[dof] = value;
+        self.renumber();
+    }
+
+    /// Prescribe many dofs to zero.
+    pub fn fix_all(&mut self, dofs: impl IntoIterator<Item = usize>) {
+        for d in dofs {
+            self.equation[d] = None;
+            self.prescribed[d] = 0.0;
+        }
+        self.renumber();
+    }
+
+    pub fn is_free(&self, dof: usize) -> bool {
+        self.equation[dof].is_some()
+    }
+
+    /// Current position of a node.
+    pub fn position(&self, u: &[f64], node: usize) -> [f64; 2] {
+        let x = self.mesh.nodes[node];
+        [x[0] + u[2 * node], x[1] + u[2 * node + 1]]
+    }
+
+    /// Volume enclosed by the pressurised surface in the configuration `u`.
+    pub fn enclosed_volume(&self, u: &[f64]) -> f64 {
+        let pts: Vec<[f64; 2]> = self
+            .pressure_surface
+            .iter()
+            .map(|&n| self.position(u, n))
+            .collect();
+        enclosed_volume(&pts)
+    }
+
+    /// Apply the prescribed values to `u`.
+    pub fn apply_prescribed(&self, u: &mut [f64]) {
+        for (d, e) in self.equation.iter().enumerate() {
+            if e.is_none() {
+                u[d] = self.prescribed[d];
+            }
+        }
+    }
+
+    /// Assemble residual and (optionally) tangent at `u` with internal pressure `p_kpa`.
+    pub fn assemble(&self, u: &[f64], p_kpa: f64, with_tangent: bool) -> Option<Assembly> {
+        let n_dofs = self.n_dofs();
+        let mut asm = Assembly {
+            residual: vec![0.0; n_dofs],
+            min_jacobian: f64::INFINITY,
+            ..Default::default()
+        };
+        if with_tangent {
+            let cap = self.mesh.elements.len() * 171;
+            asm.tangent.rows.reserve(cap);
+            asm.tangent.cols.reserve(cap);
+            asm.tangent.values.reserve(cap);
+        }
+        let mut internal = vec![0.0; n_dofs];
+        for el in &self.mesh.elements {
+            let x = self.mesh.element_coordinates(el);
+            let dofs: [usize; 18] = std::array::from_fn(|k| 2 * el.nodes[k / 2] + k % 2);
+            let ue = ElementVector::from_fn(|k, _| u[dofs[k]]);
+            let res = element::evaluate(&x, &ue, &self.materials[el.body], self.formulation)?;
+            asm.min_jacobian = asm.min_jacobian.min(res.min_jacobian);
+            for a in 0..18 {
+                internal[dofs[a]] += res.residual[a];
+            }
+            if with_tangent {
+                for a in 0..18 {
+                    let Some(ea) = self.equation[dofs[a]] else {
+                        continue;
+                    };
+                    for b in a..18 {
+                        if let Some(eb) = self.equation[dofs[b]] {
+                            asm.tangent.add(ea, eb, res.tangent[(a, b)]);
+                        }
+                    }
+                }
+            }
+        }
+        asm.force_scale = internal.iter().map(|f| f * f).sum::<f64>().sqrt();
+        for (r, f) in asm.residual.iter_mut().zip(&internal) {
+            *r += f;
+        }
+        // follower pressure: residual -p dV/dx, tangent -p d2V/dx2
+        if p_kpa != 0.0 {
+            for w in self.pressure_surface.windows(3).step_by(2) {
+                let x = [self.position(u, w[0]), self.position(u, w[1]), self.position(u, w[2])];
+                let ev = edge_volume(&x);
+                let dofs: [usize; 6] = std::array::from_fn(|k| 2 * w[k / 2] + k % 2);
+                for a in 0..6 {
+                    asm.residual[dofs[a]] -= p_kpa * ev.gradient[a];
+                }
+                if with_tangent {
+                    self.add_local(&mut asm.tangent, &dofs, |a, b| -p_kpa * ev.hessian[a][b]);
+                }
+            }
+        }
+        if let Some(contact) = &self.contact {
+            let pos = |n: usize| self.position(u, n);
+            for term in contact.active_terms(&pos) {
+                let dofs: [usize; 6] = std::array::from_fn(|k| 2 * term.nodes[k / 2] + k % 2);
+                for a in 0..6 {
+                    asm.residual[dofs[a]] += term.residual[a];
+                }
+                if with_tangent {
+                    self.add_local(&mut asm.tangent, &dofs, |a, b| term.tangent[a][b]);
+                }
+            }
+        }
+        Some(asm)
+    }
+
+    fn add_local<const N: usize>(
+        &self,
+        t: &mut UpperTriplets,
+        dofs: &[usize; N],
+        value: impl Fn(usize, usize) -> f64,
+    ) {
+        for a in 0..N {
+            let Some(ea) = self.equation[dofs[a]] else {
+                continue;
+            };
+            for b in 0..N {
+                let Some(eb) = self.equation[dofs[b]] else {
+                    continue;
+                };
+                if ea <= eb {
+                    // (a, b) and (b, a) map to the same upper entry when ea == eb only once
+                    if ea == eb && b < a {
+                        continue;
+                    }
+                    t.add(ea, eb, value(a, b));
+                }
+            }
+        }
+    }
+
+    /// Free-dof part of a full vector.
+    fn restrict(&self, full: &[f64]) -> Vec<f64> {
+        let mut out = vec![0.0; self.n_equations];
+        for (d, e) in self.equation.iter().enumerate() {
+            if let Some(e) = e {
+                out[*e] = full[d];
+            }
+        }
+        out
+    }
+
+    /// Newton–Raphson for the equilibrium at pressure `p_kpa`, starting from `u` (whose
+    /// Dirichlet dofs are set from `prescribed` first). Returns the iterations used.
+    pub fn solve_equilibrium(&mut self, u: &mut [f64], p_kpa: f64) -> Result<usize, NewtonFailure> {
+        self.apply_prescribed(u);
+        let mut last = (f64::NAN, f64::NAN);
+        for it in 0..self.newton.max_iterations {
+            let asm = self.assemble(u, p_kpa, true).ok_or(NewtonFailure::InvertedElement)?;
+            if asm.min_jacobian <= 0.0 || !asm.min_jacobian.is_finite() {
+                return Err(NewtonFailure::InvertedElement);
+            }
+            let r = self.restrict(&asm.residual);
+            let norm = r.iter().map(|x| x * x).sum::<f64>().sqrt();
+            let reference = asm.force_scale;
+            last = (norm, reference);
+            if !norm.is_finite() {
+                break;
+            }
+            if norm <= self.newton.relative_tolerance * reference + self.newton.absolute_tolerance {
+                self.newton_iterations += it;
+                return Ok(it);
+            }
+            let rhs: Vec<f64> = r.iter().map(|x| -x).collect();
+            let du = self
+                .solver
+                .solve(self.n_equations, &asm.tangent, &rhs)
+                .map_err(NewtonFailure::Linear)?;
+            for (d, e) in self.equation.iter().enumerate() {
+                if let Some(e) = e {
+                    u[d] += du[*e];
+                }
+            }
+        }
+        self.newton_iterations += self.newton.max_iterations;
+        Err(NewtonFailure::NotConverged {
+            residual: last.0,
+            reference: last.1,
+        })
+    }
+}

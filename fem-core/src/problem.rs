@@ -1,0 +1,449 @@
+//! The two-stage indentation problem of the paper ("Finite element model" section):
+//!
+//! - stage 1: the shell alone, clamped on the inner skirt surface (eq. 2, with the clamp at
+//!   r = R1 - delta as the text says), inflated by the follower pressure p_air on its inner
+//!   hemispherical surface (eq. 1), ramped with automatic step cutting;
+//! - stage 2: the sample cylinder (bonded to a rigid base, u_r = 0 on the axis) is placed so
+//!   that its top touches the inflated shell's outer apex; with p_air held, the clamped skirt
+//!   moves down by h (displacement control) in the requested steps, each cut automatically
+//!   on non-convergence. Contact is frictionless penalty/augmented-Lagrangian (eqs. 3–4).
+//!
+//! Outputs per step: u_s (eq. 6), contact radius a (zero crossing of the contact indicator
+//! `lambda / A - eps g` along the shell surface, linear interpolation between nodes), load P
+//! (total normal contact force), contact pressure profile and the enclosed inner volume.
+
+use std::time::Instant;
+
+use crate::FemError;
+use crate::contact::{ContactPair, tributary_areas};
+use crate::curve::{ContactPressureSample, Curve, CurveParams, CurvePoint};
+use crate::element::Formulation;
+use crate::material::Material;
+use crate::mesh::{
+    Mesh, SampleGeometry, SampleGrading, SampleMesh, ShellDivisions, ShellGeometry, ShellMesh,
+    add_sample, add_shell,
+};
+use crate::model::{Model, NewtonFailure};
+
+/// Shell outer radius R1 (paper).
+pub const SHELL_OUTER_RADIUS_MM: f64 = 5.0;
+/// Shell wall thickness delta (paper).
+pub const SHELL_WALL_MM: f64 = 0.4;
+/// Length l of the cylindrical skirt (paper).
+pub const SHELL_SKIRT_MM: f64 = 4.0;
+
+/// Mesh description derived from `mesh_level`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MeshSpec {
+    pub shell: ShellDivisions,
+    /// Sample element size in the contact zone and its extent.
+    pub sample_fine_size_mm: f64,
+    pub sample_fine_radius_mm: f64,
+    pub sample_fine_depth_mm: f64,
+    pub sample_growth: f64,
+}
+
+impl MeshSpec {
+    /// Level 0 is the production mesh; each +1 halves every element size.
+    pub fn for_level(level: i32) -> Self {
+        let scale = 2f64.powi(level);
+        let size = 0.1 / scale;
+        let arc_len = std::f64::consts::FRAC_PI_2 * (SHELL_OUTER_RADIUS_MM - 0.5 * SHELL_WALL_MM);
+        Self {
+            shell: ShellDivisions {
+                arc: (arc_len / size).ceil().max(4.0) as usize,
+                skirt: (SHELL_SKIRT_MM / (3.0 * size)).ceil().max(1.0) as usize,
+                thickness: (3.0 * scale).round().max(1.0) as usize,
+            },
+            sample_fine_size_mm: size,
+            sample_fine_radius_mm: 4.5,
+            sample_fine_depth_mm: 1.0,
+            sample_growth: 1.3,
+        }
+    }
+}
+
+/// Solver controls that are not model parameters.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SolverSettings {
+    pub mesh: MeshSpec,
+    pub formulation: Formulation,
+    /// Penalty = factor * min(E1, E2) / (sample fine element size).
+    pub penalty_factor: f64,
+    /// Maximum Uzawa augmentations per load step (0: pure penalty).
+    pub augmentations: usize,
+    /// Augmentation stops when the largest penetration is below this (mm).
+    pub penetration_tolerance_mm: f64,
+    /// Pressure increments of stage 1 (before any cutting).
+    pub stage1_steps: usize,
+    /// How many times a step may be halved.
+    pub max_cuts: u32,
+    /// Overrides the shell's skirt length (verification problems only).
+    pub shell_skirt_mm: f64,
+}
+
+impl SolverSettings {
+    pub fn for_level(level: i32) -> Self {
+        Self {
+            mesh: MeshSpec::for_level(level),
+            formulation: Formulation::Mixed,
+            penalty_factor: 100.0,
+            augmentations: 3,
+            penetration_tolerance_mm: 2e-4,
+            stage1_steps: 3,
+            max_cuts: 10,
+            shell_skirt_mm: SHELL_SKIRT_MM,
+        }
+    }
+}
+
+fn check(field: &'static str, value: f64, ok: bool, reason: &'static str) -> Result<(), FemError> {
+    if ok && value.is_finite() {
+        Ok(())
+    } else {
+        Err(FemError::InvalidParameter {
+            field,
+            value,
+            reason,
+        })
+    }
+}
+
+/// Validate the model parameters.
+pub fn validate(p: &CurveParams) -> Result<(), FemError> {
+    check("sample_modulus_kpa", p.sample_modulus_kpa, p.sample_modulus_kpa > 0.0, "must be > 0")?;
+    check(
+        "sample_poisson",
+        p.sample_poisson,
+        (0.0..0.5).contains(&p.sample_poisson),
+        "must be in [0, 0.5)",
+    )?;
+    check(
+        "sample_radius_mm",
+        p.sample_radius_mm,
+        p.sample_radius_mm >= SHELL_OUTER_RADIUS_MM + 1.0,
+        "must be >= 6 mm (the shell's radius plus a margin)",
+    )?;
+    check("sample_thickness_mm", p.sample_thickness_mm, p.sample_thickness_mm > 0.2, "must be > 0.2 mm")?;
+    check("shell_modulus_kpa", p.shell_modulus_kpa, p.shell_modulus_kpa > 0.0, "must be > 0")?;
+    check(
+        "shell_poisson",
+        p.shell_poisson,
+        (0.0..0.5).contains(&p.shell_poisson),
+        "must be in [0, 0.5)",
+    )?;
+    check("pressure_kpa", p.pressure_kpa, p.pressure_kpa >= 0.0, "must be >= 0 (gauge)")?;
+    check("friction", p.friction, p.friction >= 0.0, "must be >= 0")?;
+    check(
+        "max_depth_mm",
+        p.max_depth_mm,
+        (0.0..=3.0).contains(&p.max_depth_mm),
+        "must be in [0, 3] mm",
+    )?;
+    check("steps", p.steps as f64, p.steps >= 1 && p.steps <= 10_000, "must be in [1, 10000]")?;
+    check("mesh_level", f64::from(p.mesh_level), (-3..=3).contains(&p.mesh_level), "must be in [-3, 3]")?;
+    if p.friction > 0.0 {
+        return Err(FemError::Unsupported(
+            "friction > 0: this solver version implements frictionless contact only",
+        ));
+    }
+    Ok(())
+}
+
+/// The assembled indentation model and the node sets needed for its outputs.
+#[derive(Debug)]
+pub struct Indentation {
+    pub model: Model,
+    pub shell: ShellMesh,
+    pub sample: Option<SampleMesh>,
+    /// z dofs of the clamped skirt nodes (prescribed to -h).
+    pub clamp_z_dofs: Vec<usize>,
+}
+
+impl Indentation {
+    /// Build the shell (and, if `sample_top_z_mm` is given, the sample and the contact pair).
+    pub fn build(params: &CurveParams, settings: &SolverSettings, sample_top_z_mm: Option<f64>) -> Self {
+        let mut mesh = Mesh::default();
+        let shell = add_shell(
+            &mut mesh,
+            &ShellGeometry {
+                inner_radius_mm: SHELL_OUTER_RADIUS_MM - SHELL_WALL_MM,
+                outer_radius_mm: SHELL_OUTER_RADIUS_MM,
+                skirt_length_mm: settings.shell_skirt_mm,
+            },
+            &settings.mesh.shell,
+            0,
+        );
+        let grading = SampleGrading {
+            fine_size_mm: settings.mesh.sample_fine_size_mm,
+            fine_radius_mm: settings.mesh.sample_fine_radius_mm,
+            fine_depth_mm: settings.mesh.sample_fine_depth_mm,
+            growth: settings.mesh.sample_growth,
+        };
+        let sample = sample_top_z_mm.map(|top_z_mm| {
+            add_sample(
+                &mut mesh,
+                &SampleGeometry {
+                    radius_mm: params.sample_radius_mm,
+                    thickness_mm: params.sample_thickness_mm,
+                    top_z_mm,
+                },
+                &grading,
+                1,
+            )
+        });
+        let materials = vec![
+            Material::from_young_poisson(params.shell_modulus_kpa, params.shell_poisson, params.material),
+            Material::from_young_poisson(params.sample_modulus_kpa, params.sample_poisson, params.material),
+        ];
+        let mut model = Model::new(mesh, materials, settings.formulation);
+        let mut fixed: Vec<usize> = shell.axis.iter().map(|&n| 2 * n).collect();
+        for &n in &shell.clamped {
+            fixed.extend([2 * n, 2 * n + 1]);
+        }
+        if let Some(s) = &sample {
+            fixed.extend(s.axis.iter().map(|&n| 2 * n));
+            for &n in &s.bottom {
+                fixed.extend([2 * n, 2 * n + 1]);
+            }
+        }
+        model.fix_all(fixed);
+        model.pressure_surface = shell.inner_surface.clone();
+        if let Some(s) = &sample {
+            let soft_kpa = params.shell_modulus_kpa.min(params.sample_modulus_kpa);
+            let penalty = settings.penalty_factor * soft_kpa / settings.mesh.sample_fine_size_mm;
+            model.contact = Some(ContactPair::new(
+                shell.outer_surface.clone(),
+                s.top.clone(),
+                &model.mesh.nodes,
+                penalty,
+            ));
+        }
+        let clamp_z_dofs = shell.clamped.iter().map(|&n| 2 * n + 1).collect();
+        Self {
+            model,
+            shell,
+            sample,
+            clamp_z_dofs,
+        }
+    }
+
+    /// Prescribe the tube travel h (downwards positive).
+    pub fn set_tube_travel(&mut self, h_mm: f64) {
+        for &d in &self.clamp_z_dofs {
+            self.model.prescribed[d] = -h_mm;
+        }
+    }
+
+    /// Solve the equilibrium at travel `h_mm` and pressure `p_kpa` from `u`, with Uzawa
+    /// augmentations of the contact multipliers.
+    fn solve_step(
+        &mut self,
+        u: &mut [f64],
+        h_mm: f64,
+        p_kpa: f64,
+        settings: &SolverSettings,
+    ) -> Result<(), NewtonFailure> {
+        self.set_tube_travel(h_mm);
+        self.model.solve_equilibrium(u, p_kpa)?;
+        for _ in 0..settings.augmentations {
+            let model = &self.model;
+            let Some(contact) = &model.contact else {
+                break;
+            };
+            let pos = |n: usize| model.position(u, n);
+            if contact.max_penetration(&pos) <= settings.penetration_tolerance_mm {
+                break;
+            }
+            let pos_nodes: Vec<[f64; 2]> = (0..model.mesh.nodes.len()).map(|n| model.position(u, n)).collect();
+            if let Some(contact) = &mut self.model.contact {
+                contact.augment(&|n: usize| pos_nodes[n]);
+            }
+            self.model.solve_equilibrium(u, p_kpa)?;
+        }
+        Ok(())
+    }
+
+    /// Curve outputs at the state `u`.
+    fn curve_point(&self, u: &[f64], h_mm: f64, apex_z0_mm: f64) -> CurvePoint {
+        let model = &self.model;
+        let u_s_mm = h_mm + (u[2 * self.shell.inner_apex + 1] - apex_z0_mm);
+        let volume_mm3 = model.enclosed_volume(u);
+        let mut load_mn = 0.0;
+        let mut a_mm = 0.0;
+        let mut contact_pressure = Vec::new();
+        if let Some(contact) = &model.contact {
+            let pos = |n: usize| model.position(u, n);
+            for term in contact.active_terms(&pos) {
+                load_mn -= term.residual[1];
+            }
+            let gaps = contact.slave_gaps(&pos);
+            let current: Vec<[f64; 2]> = contact.slaves.iter().map(|&n| pos(n)).collect();
+            let areas = tributary_areas(&current);
+            let eps = contact.penalty_kpa_per_mm;
+            // contact indicator: pressure per reference area inside, -eps * gap outside
+            let indicator: Vec<f64> = gaps
+                .iter()
+                .enumerate()
+                .map(|(s, g)| match g {
+                    Some(g) => contact.multipliers[s] / contact.slave_areas_mm2[s] - eps * g,
+                    None => f64::NEG_INFINITY,
+                })
+                .collect();
+            for s in 0..indicator.len() {
+                let force = (indicator[s] * contact.slave_areas_mm2[s]).max(0.0);
+                contact_pressure.push(ContactPressureSample {
+                    r_mm: current[s][0],
+                    pressure_kpa: if areas[s] > 0.0 { force / areas[s] } else { 0.0 },
+                });
+                if indicator[s] <= 0.0 {
+                    if s > 0 {
+                        let (q0, q1) = (indicator[s - 1], indicator[s]);
+                        let t = if q1.is_finite() { q0 / (q0 - q1) } else { 1.0 };
+                        a_mm = current[s - 1][0] + t * (current[s][0] - current[s - 1][0]);
+                    }
+                    break;
+                }
+            }
+        }
+        CurvePoint {
+            h_mm,
+            u_s_mm,
+            a_mm,
+            load_n: load_mn * 1e-3,
+            volume_mm3,
+            contact_pressure,
+        }
+    }
+}
+
+/// Drive `solve(target, state)` from `from` to `to` in increments starting at `increment`,
+/// halving on failure (at most `max_cuts` times in a row) and growing back after success.
+fn continuation(
+    from: f64,
+    to: f64,
+    increment: f64,
+    max_cuts: u32,
+    state: &mut Vec<f64>,
+    mut solve: impl FnMut(f64, &mut Vec<f64>) -> Result<(), NewtonFailure>,
+    mut on_failure_restore: impl FnMut(),
+    mut on_success_commit: impl FnMut(),
+    stage: &'static str,
+    unit: &'static str,
+) -> Result<(), FemError> {
+    let mut done = from;
+    let mut step = increment;
+    let mut cuts = 0;
+    while done < to - 1e-12 * to.abs().max(1.0) {
+        let target = (done + step).min(to);
+        let mut trial = state.clone();
+        match solve(target, &mut trial) {
+            Ok(()) => {
+                *state = trial;
+                done = target;
+                on_success_commit();
+                if cuts > 0 {
+                    cuts -= 1;
+                    step *= 2.0;
+                }
+            }
+            Err(failure) => {
+                on_failure_restore();
+                cuts += 1;
+                if cuts > max_cuts {
+                    return Err(FemError::NoConvergence {
+                        stage,
+                        load: format!("{target:.6} {unit}"),
+                        detail: failure.to_string(),
+                    });
+                }
+                step *= 0.5;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Solve one a–u_s curve with the default solver settings for `params.mesh_level`.
+pub fn solve_curve(params: &CurveParams) -> Result<Curve, FemError> {
+    solve_curve_with(params, &SolverSettings::for_level(params.mesh_level))
+}
+
+/// Solve one a–u_s curve with explicit solver settings.
+///
+/// faer's global parallelism is set to sequential: curves are parallelised by the caller.
+pub fn solve_curve_with(params: &CurveParams, settings: &SolverSettings) -> Result<Curve, FemError> {
+    validate(params)?;
+    faer::set_global_parallelism(faer::Par::Seq);
+    let started = Instant::now();
+
+    // stage 1: inflation of the shell alone
+    let mut stage1 = Indentation::build(params, settings, None);
+    let mut u = vec![0.0; stage1.model.n_dofs()];
+    let rest_volume_mm3 = stage1.model.enclosed_volume(&u);
+    if params.pressure_kpa > 0.0 {
+        let steps = settings.stage1_steps.max(1) as f64;
+        let model = &mut stage1.model;
+        let cell = std::cell::RefCell::new(model);
+        continuation(
+            0.0,
+            params.pressure_kpa,
+            params.pressure_kpa / steps,
+            settings.max_cuts,
+            &mut u,
+            |p, state| cell.borrow_mut().solve_equilibrium(state, p).map(|_| ()),
+            || {},
+            || {},
+            "stage 1 (inflation)",
+            "kPa",
+        )?;
+    }
+    let inflated_volume_mm3 = stage1.model.enclosed_volume(&u);
+    let outer_apex = stage1.shell.outer_apex;
+    let inflation_apex_mm = -u[2 * outer_apex + 1];
+    let top_z_mm = stage1.model.position(&u, outer_apex)[1];
+
+    // stage 2: shell + sample, tube travel h with the pressure held
+    let mut ind = Indentation::build(params, settings, Some(top_z_mm));
+    let mut state = vec![0.0; ind.model.n_dofs()];
+    state[..u.len()].copy_from_slice(&u);
+    let apex_z0_mm = state[2 * ind.shell.inner_apex + 1];
+    let mut points = vec![ind.curve_point(&state, 0.0, apex_z0_mm)];
+    let dh = params.max_depth_mm / params.steps as f64;
+    for k in 1..=params.steps {
+        let h_from = dh * (k - 1) as f64;
+        let h_to = dh * k as f64;
+        let saved = ind.model.contact.as_ref().map(|c| c.multipliers.clone());
+        let committed = std::cell::RefCell::new(saved);
+        let ind_cell = std::cell::RefCell::new(&mut ind);
+        continuation(
+            h_from,
+            h_to,
+            dh,
+            settings.max_cuts,
+            &mut state,
+            |h, s| ind_cell.borrow_mut().solve_step(s, h, params.pressure_kpa, settings),
+            || {
+                let mut ind = ind_cell.borrow_mut();
+                if let (Some(c), Some(saved)) = (ind.model.contact.as_mut(), committed.borrow().as_ref()) {
+                    c.multipliers.clone_from(saved);
+                }
+            },
+            || {
+                let ind = ind_cell.borrow();
+                *committed.borrow_mut() = ind.model.contact.as_ref().map(|c| c.multipliers.clone());
+            },
+            "stage 2 (indentation)",
+            "mm of tube travel",
+        )?;
+        points.push(ind.curve_point(&state, h_to, apex_z0_mm));
+    }
+    Ok(Curve {
+        params: params.clone(),
+        rest_volume_mm3,
+        inflated_volume_mm3,
+        inflation_apex_mm,
+        points,
+        solve_seconds: started.elapsed().as_secs_f64(),
+    })
+}
