@@ -10,7 +10,7 @@ use crate::FemError;
 use crate::contact::ContactPair;
 use crate::element::{self, ElementVector, Formulation};
 use crate::linear_solver::{SymmetricSolver, UpperTriplets};
-use crate::material::Material;
+use crate::material::{Material, MaterialLaw};
 use crate::mesh::Mesh;
 use crate::pressure_load::{edge_volume, enclosed_volume};
 
@@ -145,6 +145,11 @@ impl Model {
         self.equation[dof].is_some()
     }
 
+    /// True when every body is small-strain linear elastic (pressure as a dead load).
+    pub fn geometrically_linear(&self) -> bool {
+        self.materials.iter().all(|m| m.law == MaterialLaw::Linear)
+    }
+
     /// Current position of a node.
     pub fn position(&self, u: &[f64], node: usize) -> [f64; 2] {
         let x = self.mesh.nodes[node];
@@ -214,13 +219,20 @@ impl Model {
         // follower pressure: residual -p dV/dx, tangent -p d2V/dx2
         if p_kpa != 0.0 {
             for w in self.pressure_surface.windows(3).step_by(2) {
-                let x = [self.position(u, w[0]), self.position(u, w[1]), self.position(u, w[2])];
+                // small-strain (linear) problems take the pressure as a dead load on the
+                // reference surface; finite-strain ones as a follower load
+                let x = if self.geometrically_linear() {
+                    [self.mesh.nodes[w[0]], self.mesh.nodes[w[1]], self.mesh.nodes[w[2]]]
+                } else {
+                    [self.position(u, w[0]), self.position(u, w[1]), self.position(u, w[2])]
+                };
                 let ev = edge_volume(&x);
+                let follower = !self.geometrically_linear();
                 let dofs: [usize; 6] = std::array::from_fn(|k| 2 * w[k / 2] + k % 2);
                 for a in 0..6 {
                     asm.residual[dofs[a]] -= p_kpa * ev.gradient[a];
                 }
-                if with_tangent {
+                if with_tangent && follower {
                     self.add_local(&mut asm.tangent, &dofs, |a, b| -p_kpa * ev.hessian[a][b]);
                 }
             }
