@@ -1,0 +1,60 @@
+//! The 2 kHz control tick: sample, run the controller, apply its outputs, feed the watchdog,
+//! and reboot into BOOTSEL once `EnterBootloader` has been acknowledged.
+
+use embassy_rp::watchdog::Watchdog;
+use embassy_time::{Duration, Instant, Ticker};
+use firmware::{RawInputs, TICK_PERIOD_US};
+
+use crate::analog::AnalogInputs;
+use crate::outputs::Actuators;
+use crate::shared::{LOAD_CONVERSION, PENDING_STEPS, STEPPER_ENABLE, STEPS_READY, with_controller};
+
+/// The watchdog resets the chip when the control tick stalls for this long (200 ticks).
+pub const WATCHDOG_TIMEOUT: Duration = Duration::from_millis(100);
+/// Time between the Ack of `EnterBootloader` (queued for USB) and the reboot.
+const REBOOT_GRACE: Duration = Duration::from_millis(50);
+
+#[embassy_executor::task]
+pub async fn control_task(
+    mut analog: AnalogInputs,
+    mut actuators: Actuators,
+    mut watchdog: Watchdog,
+) {
+    let mut ticker = Ticker::every(Duration::from_micros(u64::from(TICK_PERIOD_US)));
+    let mut stepper_enabled = false;
+    let mut reboot_at: Option<Instant> = None;
+    loop {
+        ticker.next().await;
+        let now = Instant::now();
+        let (proximity_counts, manometer_counts) = analog.read();
+        let load_counts = LOAD_CONVERSION.lock(|c| c.take());
+        let out = with_controller(|c| {
+            c.tick(
+                now.as_micros(),
+                &RawInputs {
+                    proximity_counts,
+                    manometer_counts,
+                    load_counts,
+                },
+            )
+        });
+        actuators.apply(out.pump_duty_per_10k, out.led_duty_per_10k, out.vent_open);
+        if out.stage.steps != 0 || out.stage.enable != stepper_enabled {
+            stepper_enabled = out.stage.enable;
+            PENDING_STEPS.lock(|p| p.set(p.get().saturating_add(out.stage.steps)));
+            STEPPER_ENABLE.lock(|e| e.set(stepper_enabled));
+            STEPS_READY.signal(());
+        }
+        watchdog.feed(WATCHDOG_TIMEOUT);
+
+        if out.reboot_to_bootloader {
+            let at = *reboot_at.get_or_insert(now + REBOOT_GRACE);
+            if now >= at {
+                defmt::info!("rebooting into the USB bootloader");
+                actuators.apply(0, 0, true);
+                // Both interfaces (mass storage for UF2, PICOBOOT), no activity LED.
+                embassy_rp::rom_data::reset_to_usb_boot(0, 0);
+            }
+        }
+    }
+}

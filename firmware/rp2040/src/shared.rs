@@ -1,0 +1,38 @@
+//! State shared between the tasks. Every task runs on the one thread-mode executor, so a
+//! thread-mode mutex is enough and no interrupt is masked while the controller runs.
+
+use core::cell::{Cell, RefCell};
+
+use embassy_sync::blocking_mutex::Mutex;
+use embassy_sync::blocking_mutex::raw::ThreadModeRawMutex;
+use embassy_sync::signal::Signal;
+use firmware::{Controller, ControllerConfig};
+
+static CONTROLLER: Mutex<ThreadModeRawMutex, RefCell<Option<Controller>>> =
+    Mutex::new(RefCell::new(None));
+
+/// Creates the controller (once, in `main`).
+pub fn init_controller(config: ControllerConfig) {
+    CONTROLLER.lock(|c| *c.borrow_mut() = Some(Controller::new(config)));
+}
+
+/// Runs `f` on the controller. Panics only if called before [`init_controller`], which
+/// `main` runs before spawning any task.
+pub fn with_controller<R>(f: impl FnOnce(&mut Controller) -> R) -> R {
+    CONTROLLER.lock(|c| {
+        let mut guard = c.borrow_mut();
+        let controller = guard.as_mut().expect("controller initialised in main");
+        f(controller)
+    })
+}
+
+/// The latest HX711 conversion not yet consumed by the control tick.
+pub static LOAD_CONVERSION: Mutex<ThreadModeRawMutex, Cell<Option<i32>>> =
+    Mutex::new(Cell::new(None));
+
+/// Signed microsteps handed from the control tick to the step generator, not yet emitted.
+pub static PENDING_STEPS: Mutex<ThreadModeRawMutex, Cell<i32>> = Mutex::new(Cell::new(0));
+/// Wakes the step generator when steps are pending.
+pub static STEPS_READY: Signal<ThreadModeRawMutex, ()> = Signal::new();
+/// Driver enable requested by the controller.
+pub static STEPPER_ENABLE: Mutex<ThreadModeRawMutex, Cell<bool>> = Mutex::new(Cell::new(false));
