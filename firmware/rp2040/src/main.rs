@@ -4,8 +4,9 @@
 //! peripherals, calls `Controller::tick` every 500 µs and `Controller::handle` for every
 //! request from USB, and applies the outputs. Pinout: see [`board`].
 //!
-//! Tasks (one thread-mode executor; the controller is shared through a thread-mode mutex,
-//! so no interrupts are masked while it runs):
+//! Tasks (the thread-mode executor runs everything that touches the controller, through a
+//! thread-mode mutex; the step generator runs alone on a higher-priority interrupt
+//! executor so its pulse timing does not wait for USB or ADC work):
 //! - `control::control_task`: 2 kHz tick: ADC oversampling, controller tick, pump/LED PWM,
 //!   vent, step hand-off, watchdog feed;
 //! - `hx711::hx711_task`: load-cell conversions as they become ready (80 SPS);
@@ -26,12 +27,24 @@ mod stepper;
 mod usb_link;
 
 use defmt::info;
-use embassy_executor::Spawner;
+use embassy_executor::{InterruptExecutor, Spawner};
 use embassy_rp::gpio::{Input, Level, Output, Pull};
+use embassy_rp::interrupt;
+use embassy_rp::interrupt::{InterruptExt, Priority};
 use embassy_rp::watchdog::{ResetReason, Watchdog};
 use embassy_time::Instant;
 use firmware::ControllerConfig;
 use {defmt_rtt as _, panic_probe as _};
+
+/// Runs the step generator at a priority above thread mode.
+static EXECUTOR_HIGH: InterruptExecutor = InterruptExecutor::new();
+
+#[interrupt]
+unsafe fn SWI_IRQ_1() {
+    // SAFETY: SWI_IRQ_1 is reserved for this executor, which `main` starts on it before
+    // the interrupt is ever pended.
+    unsafe { EXECUTOR_HIGH.on_interrupt() }
+}
 
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
@@ -71,6 +84,8 @@ async fn main(spawner: Spawner) {
 
     spawner.spawn(control::control_task(analog, outputs, watchdog).expect("spawned once"));
     spawner.spawn(hx711::hx711_task(hx711).expect("spawned once"));
-    spawner.spawn(stepper::stepper_task(stepper).expect("spawned once"));
+    interrupt::SWI_IRQ_1.set_priority(Priority::P2);
+    let high_spawner = EXECUTOR_HIGH.start(interrupt::SWI_IRQ_1);
+    high_spawner.spawn(stepper::stepper_task(stepper).expect("spawned once"));
     usb_link::start(&spawner, p.USB, serial);
 }

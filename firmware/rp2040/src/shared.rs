@@ -1,10 +1,12 @@
-//! State shared between the tasks. Every task runs on the one thread-mode executor, so a
-//! thread-mode mutex is enough and no interrupt is masked while the controller runs.
+//! State shared between the tasks. The controller is used only by thread-mode tasks, so a
+//! thread-mode mutex guards it and no interrupt is masked while it runs. The step hand-off
+//! is shared with the step generator, which runs on the high-priority interrupt executor,
+//! so it uses critical sections (held for a few instructions).
 
 use core::cell::{Cell, RefCell};
 
 use embassy_sync::blocking_mutex::Mutex;
-use embassy_sync::blocking_mutex::raw::ThreadModeRawMutex;
+use embassy_sync::blocking_mutex::raw::{CriticalSectionRawMutex, ThreadModeRawMutex};
 use embassy_sync::signal::Signal;
 use firmware::{Controller, ControllerConfig};
 
@@ -31,8 +33,9 @@ pub static LOAD_CONVERSION: Mutex<ThreadModeRawMutex, Cell<Option<i32>>> =
     Mutex::new(Cell::new(None));
 
 /// Signed microsteps handed from the control tick to the step generator, not yet emitted.
-pub static PENDING_STEPS: Mutex<ThreadModeRawMutex, Cell<i32>> = Mutex::new(Cell::new(0));
+pub static PENDING_STEPS: Mutex<CriticalSectionRawMutex, Cell<i32>> = Mutex::new(Cell::new(0));
 /// Wakes the step generator when steps are pending.
-pub static STEPS_READY: Signal<ThreadModeRawMutex, ()> = Signal::new();
+pub static STEPS_READY: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 /// Driver enable requested by the controller.
-pub static STEPPER_ENABLE: Mutex<ThreadModeRawMutex, Cell<bool>> = Mutex::new(Cell::new(false));
+pub static STEPPER_ENABLE: Mutex<CriticalSectionRawMutex, Cell<bool>> =
+    Mutex::new(Cell::new(false));
