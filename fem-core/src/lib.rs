@@ -12,6 +12,7 @@ pub mod curve;
 pub mod element;
 pub mod error;
 pub mod linear_solver;
+pub mod lut;
 pub mod material;
 pub mod mesh;
 pub mod model;

@@ -1,0 +1,74 @@
+//! Building a table, or one shard of it, in parallel over curves (rayon) with any curve
+//! solver. The curves are collected in grid order whatever thread finishes first, and no
+//! timing enters the table, so the output is reproducible bit for bit.
+
+use std::time::Instant;
+
+use rayon::prelude::*;
+
+use super::error::LutError;
+use super::grid::{LutGrid, Shard};
+use super::table::{Lut, LutCurve};
+use crate::curve::{Curve, CurveParams};
+
+/// Progress report for one finished curve (for printing; never stored in the table).
+#[derive(Debug, Clone)]
+pub struct CurveReport {
+    /// Flat grid index.
+    pub index: usize,
+    /// Human description (E2, p_air, effects).
+    pub what: String,
+    /// Wall-clock seconds of this curve's solve.
+    pub seconds: f64,
+    /// `None` on success, the reason otherwise.
+    pub failure: Option<String>,
+}
+
+/// Build the curves of `grid` (all of them, or those of `shard`) with `solver`, in parallel
+/// on the current rayon pool. `on_curve` is called as each curve finishes (from worker
+/// threads, in completion order). A failed solve is recorded in the table (and reported),
+/// not fatal: the caller decides what to do with a table that has failures.
+pub fn build_lut<S, E>(
+    grid: &LutGrid,
+    shard: Option<Shard>,
+    solver: &S,
+    on_curve: &(dyn Fn(&CurveReport) + Sync),
+) -> Result<Lut, LutError>
+where
+    S: Fn(&CurveParams) -> Result<Curve, E> + Sync,
+    E: std::fmt::Display,
+{
+    grid.validate()?;
+    let indices: Vec<usize> = (0..grid.curve_count())
+        .filter(|&i| shard.is_none_or(|s| s.contains(i)))
+        .collect();
+    let curves: Vec<LutCurve> = indices
+        .par_iter()
+        .with_max_len(1)
+        .map(|&index| {
+            let params = grid.curve_params(index);
+            let start = Instant::now();
+            let result = solver(&params)
+                .map_err(|e| e.to_string())
+                .and_then(|curve| LutCurve::from_curve(index, &params, &curve));
+            let seconds = start.elapsed().as_secs_f64();
+            let curve = match result {
+                Ok(c) => c,
+                Err(reason) => LutCurve::failed(index, reason),
+            };
+            on_curve(&CurveReport {
+                index,
+                what: grid.describe(index),
+                seconds,
+                failure: curve.failure.clone(),
+            });
+            curve
+        })
+        .collect();
+    Ok(Lut {
+        grid: grid.clone(),
+        fem_core_version: Lut::this_fem_core_version(),
+        shard,
+        curves,
+    })
+}

@@ -1,0 +1,67 @@
+//! Errors of the lookup-table code. File errors name the file; query errors name the axis.
+
+use std::path::PathBuf;
+
+/// Everything that can go wrong building, reading, merging or querying a LUT.
+#[derive(Debug, thiserror::Error)]
+pub enum LutError {
+    /// The grid definition is unusable (empty or unsorted axis, non-finite value, ...).
+    #[error("invalid LUT grid: {0}")]
+    InvalidGrid(String),
+    /// A `K/N` shard specification is malformed or out of range.
+    #[error("invalid shard {spec:?}: {reason}")]
+    InvalidShard { spec: String, reason: String },
+    /// Reading or writing a file failed.
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// The file is not a LUT file or is damaged (bad magic, truncated, malformed header).
+    #[error("{source_name}: not a valid LUT file: {reason}")]
+    Format { source_name: String, reason: String },
+    /// The file was written in a format version this build cannot read.
+    #[error(
+        "{source_name}: LUT format version {found} is not supported (this build reads version {expected})"
+    )]
+    Version {
+        source_name: String,
+        found: String,
+        expected: u32,
+    },
+    /// The content hash stored in the file does not match its content.
+    #[error(
+        "{source_name}: content hash mismatch: the header says sha256:{stored} but the content hashes to sha256:{computed} (file damaged or edited)"
+    )]
+    HashMismatch {
+        source_name: String,
+        stored: String,
+        computed: String,
+    },
+    /// Shards cannot be merged (different grids, missing or duplicated shards or curves).
+    #[error("cannot merge shards: {0}")]
+    Merge(String),
+    /// A query lies outside the table on the named axis (and clamping was not requested).
+    #[error("{axis} = {value} is outside the table's range [{min}, {max}]")]
+    OutOfRange {
+        axis: &'static str,
+        value: f64,
+        min: f64,
+        max: f64,
+    },
+    /// A query needs a curve that is missing from the table or whose solve failed.
+    #[error("curve {index} ({what}) is not usable: {reason}")]
+    CurveUnavailable {
+        index: usize,
+        what: String,
+        reason: String,
+    },
+    /// An effect-axis value requested by a query is not one of the grid's values.
+    #[error("{axis} = {value} is not on the table's grid (grid values: {grid})")]
+    NotOnGrid {
+        axis: &'static str,
+        value: String,
+        grid: String,
+    },
+}

@@ -1,0 +1,380 @@
+//! Interpolation of a table at (E2, p_air, u_s): contact radius a, load P, inner volume and
+//! tube travel h, plus d a / d ln E2 for fits.
+//!
+//! 1. Along each curve, a (and P, volume, h) is a PCHIP function of u_s (the curves share
+//!    their h steps but not their u_s values). Only the strictly increasing run of u_s is
+//!    used: if u_s stalls (e.g. before contact), the first point of the stall is kept.
+//! 2. Across E2, PCHIP in ln E2 through the curve values at the two bracketing modulus
+//!    nodes and, where the grid has them, one more node on either side (the Fritsch–Butland
+//!    slopes are local, so this equals the global PCHIP through those nodes). The two
+//!    bracketing curves must reach the queried u_s; an outer neighbour that does not (a
+//!    softer curve ends at a smaller u_s) is continued linearly in u_s from its last point
+//!    with its end slope, and only serves to estimate the node slope. That keeps the
+//!    stencil fixed, so the result is continuous in u_s and C1 in ln E2 (a fit over E2 is
+//!    smooth); d a / d ln E2 is the derivative of the cubic.
+//! 3. Across p_air, linear between the bracketing pressure nodes.
+//!
+//! The u_s range that can be queried at a given E2 is that of the softer bracketing curve
+//! (soft samples take most of the travel, so their u_s range is small). Outside the table a
+//! query fails with [`LutError::OutOfRange`] unless [`OutOfRange::Clamp`] is requested, in
+//! which case the query is moved to the nearest covered point and `clamped` is set.
+
+use super::error::LutError;
+use super::grid::EffectSelection;
+use super::pchip;
+use super::table::Lut;
+
+/// What to do with a query outside the table.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum OutOfRange {
+    /// Return [`LutError::OutOfRange`].
+    Error,
+    /// Clamp each coordinate to the covered range and flag the sample as clamped.
+    Clamp,
+}
+
+/// A point to interpolate at.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LutQuery {
+    pub modulus_kpa: f64,
+    pub pressure_kpa: f64,
+    pub u_s_mm: f64,
+}
+
+/// Interpolated values at a query point.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LutSample {
+    pub a_mm: f64,
+    pub load_n: f64,
+    pub volume_mm3: f64,
+    pub h_mm: f64,
+    /// d a / d ln E2 at fixed p_air and u_s.
+    pub da_dln_modulus_mm: f64,
+    /// True if any coordinate was clamped into the table.
+    pub clamped: bool,
+}
+
+/// Number of interpolated quantities: a, P, volume, h.
+const NQ: usize = 4;
+
+/// One curve prepared for interpolation along u_s.
+#[derive(Debug, Clone)]
+struct PreparedCurve {
+    u_s_mm: Vec<f64>,
+    /// a, P, volume, h over `u_s_mm`.
+    q: [Vec<f64>; NQ],
+}
+
+impl PreparedCurve {
+    fn range(&self) -> (f64, f64) {
+        (self.u_s_mm[0], self.u_s_mm[self.u_s_mm.len() - 1])
+    }
+
+    fn at(&self, u: f64) -> [f64; NQ] {
+        std::array::from_fn(|i| pchip::eval(&self.u_s_mm, &self.q[i], u).0)
+    }
+
+    /// Like `at`, but continued linearly (value and end slope of the PCHIP) beyond the
+    /// curve's u_s range; used only for outer stencil nodes.
+    fn at_extended(&self, u: f64) -> [f64; NQ] {
+        let (lo, hi) = self.range();
+        let n = self.u_s_mm.len();
+        let end = if u > hi {
+            Some((n - 1, hi))
+        } else if u < lo {
+            Some((0, lo))
+        } else {
+            None
+        };
+        match end {
+            None => self.at(u),
+            Some((k, x)) => std::array::from_fn(|i| {
+                self.q[i][k] + pchip::node_slope(&self.u_s_mm, &self.q[i], k) * (u - x)
+            }),
+        }
+    }
+}
+
+/// A two-dimensional (E2, p_air) slice of a table at fixed effect-axis values, prepared for
+/// fast queries.
+#[derive(Debug, Clone)]
+pub struct LutSlice<'a> {
+    lut: &'a Lut,
+    ln_modulus: Vec<f64>,
+    /// `curves[p][e]`: the prepared curve or why it is unusable, with its grid index.
+    curves: Vec<Vec<(usize, Result<PreparedCurve, String>)>>,
+}
+
+impl Lut {
+    /// The (E2, p_air) slice at the given effect-axis values (each must be a grid value, or
+    /// `None` for a single-valued axis).
+    pub fn slice(&self, sel: &EffectSelection) -> Result<LutSlice<'_>, LutError> {
+        let (t, f, m) = self.grid.resolve_effects(sel)?;
+        if self.grid.modulus_kpa.len() < 2 {
+            return Err(LutError::InvalidGrid(
+                "interpolation needs at least two modulus values".into(),
+            ));
+        }
+        let curves = (0..self.grid.pressure_kpa.len())
+            .map(|p| {
+                (0..self.grid.modulus_kpa.len())
+                    .map(|e| {
+                        let index = self.grid.flat_index(super::grid::GridIndex {
+                            material: m,
+                            friction: f,
+                            thickness: t,
+                            pressure: p,
+                            modulus: e,
+                        });
+                        (index, self.prepare(index))
+                    })
+                    .collect()
+            })
+            .collect();
+        Ok(LutSlice {
+            lut: self,
+            ln_modulus: self.grid.modulus_kpa.iter().map(|e| e.ln()).collect(),
+            curves,
+        })
+    }
+
+    fn prepare(&self, index: usize) -> Result<PreparedCurve, String> {
+        let c = self
+            .curve(index)
+            .ok_or_else(|| "not in this table (a shard?)".to_string())?;
+        if let Some(f) = &c.failure {
+            return Err(format!("its solve failed: {f}"));
+        }
+        let mut keep = Vec::with_capacity(c.len());
+        for k in 0..c.len() {
+            if keep
+                .last()
+                .is_none_or(|&j: &usize| c.u_s_mm[k] > c.u_s_mm[j])
+            {
+                keep.push(k);
+            }
+        }
+        if keep.len() < 2 {
+            return Err("u_s never increases along it".into());
+        }
+        let pick = |v: &[f64]| keep.iter().map(|&k| v[k]).collect::<Vec<f64>>();
+        Ok(PreparedCurve {
+            u_s_mm: pick(&c.u_s_mm),
+            q: [
+                pick(&c.a_mm),
+                pick(&c.load_n),
+                pick(&c.volume_mm3),
+                pick(&c.h_mm),
+            ],
+        })
+    }
+}
+
+/// Bracketing nodes of `x` on an increasing axis: (i0, i1, weight of i1), after optional
+/// clamping. A single-node axis accepts only its value.
+fn bracket(
+    axis: &'static str,
+    nodes: &[f64],
+    x: f64,
+    mode: OutOfRange,
+    clamped: &mut bool,
+) -> Result<(f64, usize), LutError> {
+    let (lo, hi) = (nodes[0], nodes[nodes.len() - 1]);
+    let mut x = x;
+    if !x.is_finite() || x < lo || x > hi {
+        if mode == OutOfRange::Clamp && x.is_finite() {
+            x = x.clamp(lo, hi);
+            *clamped = true;
+        } else {
+            return Err(LutError::OutOfRange {
+                axis,
+                value: x,
+                min: lo,
+                max: hi,
+            });
+        }
+    }
+    let k = if nodes.len() == 1 {
+        0
+    } else {
+        pchip::interval(nodes, x)
+    };
+    Ok((x, k))
+}
+
+impl LutSlice<'_> {
+    fn describe(&self, index: usize) -> String {
+        self.lut.grid.describe(index)
+    }
+
+    /// Interpolate at `q`.
+    pub fn sample(&self, q: &LutQuery, mode: OutOfRange) -> Result<LutSample, LutError> {
+        let mut clamped = false;
+        let (p, jp) = bracket(
+            "pressure_kpa",
+            &self.lut.grid.pressure_kpa,
+            q.pressure_kpa,
+            mode,
+            &mut clamped,
+        )?;
+        let (x, ke) = bracket(
+            "modulus_kpa",
+            &self.ln_modulus,
+            q.modulus_kpa.ln(),
+            mode,
+            &mut clamped,
+        )
+        .map_err(|e| match e {
+            LutError::OutOfRange { .. } => LutError::OutOfRange {
+                axis: "modulus_kpa",
+                value: q.modulus_kpa,
+                min: self.lut.grid.modulus_kpa[0],
+                max: self.lut.grid.modulus_kpa[self.ln_modulus.len() - 1],
+            },
+            other => other,
+        })?;
+        let pressures = &self.lut.grid.pressure_kpa;
+        // pressure weights: linear between jp and jp+1 (a single node gets weight 1)
+        let nodes: Vec<(usize, f64)> = if pressures.len() == 1 {
+            vec![(0, 1.0)]
+        } else {
+            let w = (p - pressures[jp]) / (pressures[jp + 1] - pressures[jp]);
+            vec![(jp, 1.0 - w), (jp + 1, w)]
+        };
+        let mut u = q.u_s_mm;
+        if !u.is_finite() {
+            return Err(LutError::OutOfRange {
+                axis: "u_s_mm",
+                value: u,
+                min: f64::NAN,
+                max: f64::NAN,
+            });
+        }
+        // u_s range covered by every bracketing curve
+        let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
+        for &(j, w) in &nodes {
+            if w == 0.0 {
+                continue;
+            }
+            for e in [ke, ke + 1] {
+                let (index, c) = &self.curves[j][e];
+                let c = c.as_ref().map_err(|reason| LutError::CurveUnavailable {
+                    index: *index,
+                    what: self.describe(*index),
+                    reason: reason.clone(),
+                })?;
+                let (a, b) = c.range();
+                lo = lo.max(a);
+                hi = hi.min(b);
+            }
+        }
+        if u < lo || u > hi {
+            if mode == OutOfRange::Clamp && lo <= hi {
+                u = u.clamp(lo, hi);
+                clamped = true;
+            } else {
+                return Err(LutError::OutOfRange {
+                    axis: "u_s_mm",
+                    value: u,
+                    min: lo,
+                    max: hi,
+                });
+            }
+        }
+        let mut out = [0.0; NQ];
+        let mut da = 0.0;
+        for &(j, w) in &nodes {
+            if w == 0.0 {
+                continue;
+            }
+            let (v, d) = self.across_modulus(j, ke, x, u);
+            for i in 0..NQ {
+                out[i] += w * v[i];
+            }
+            da += w * d;
+        }
+        Ok(LutSample {
+            a_mm: out[0],
+            load_n: out[1],
+            volume_mm3: out[2],
+            h_mm: out[3],
+            da_dln_modulus_mm: da,
+            clamped,
+        })
+    }
+
+    /// PCHIP in ln E2 at pressure node j over the interval [ke, ke+1] (both covering u):
+    /// values of every quantity and d a / d ln E2.
+    fn across_modulus(&self, j: usize, ke: usize, x: f64, u: f64) -> ([f64; NQ], f64) {
+        let row = &self.curves[j];
+        let usable = |e: usize| row[e].1.is_ok();
+        let first = if ke > 0 && usable(ke - 1) { ke - 1 } else { ke };
+        let last = if ke + 2 < row.len() && usable(ke + 2) {
+            ke + 2
+        } else {
+            ke + 1
+        };
+        let xs = &self.ln_modulus[first..=last];
+        let vals: Vec<[f64; NQ]> = (first..=last)
+            .map(|e| match &row[e].1 {
+                Ok(c) if e == ke || e == ke + 1 => c.at(u),
+                Ok(c) => c.at_extended(u),
+                Err(_) => [f64::NAN; NQ], // unreachable: checked by the caller and `usable`
+            })
+            .collect();
+        let mut out = [0.0; NQ];
+        let mut da = 0.0;
+        for i in 0..NQ {
+            let ys: Vec<f64> = vals.iter().map(|v| v[i]).collect();
+            let (y, d) = pchip::eval(xs, &ys, x);
+            out[i] = y;
+            if i == 0 {
+                da = d;
+            }
+        }
+        (out, da)
+    }
+
+    /// The u_s range over which a query at (E2, p_air) can be answered without clamping.
+    pub fn u_s_range_mm(
+        &self,
+        modulus_kpa: f64,
+        pressure_kpa: f64,
+    ) -> Result<(f64, f64), LutError> {
+        let mut clamped = false;
+        let (_, jp) = bracket(
+            "pressure_kpa",
+            &self.lut.grid.pressure_kpa,
+            pressure_kpa,
+            OutOfRange::Error,
+            &mut clamped,
+        )?;
+        let (_, ke) = bracket(
+            "modulus_kpa",
+            &self.ln_modulus,
+            modulus_kpa.ln(),
+            OutOfRange::Error,
+            &mut clamped,
+        )?;
+        let js: Vec<usize> = if self.lut.grid.pressure_kpa.len() == 1 {
+            vec![0]
+        } else {
+            vec![jp, jp + 1]
+        };
+        let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
+        for j in js {
+            for e in [ke, ke + 1] {
+                let (index, c) = &self.curves[j][e];
+                let c = c.as_ref().map_err(|reason| LutError::CurveUnavailable {
+                    index: *index,
+                    what: self.describe(*index),
+                    reason: reason.clone(),
+                })?;
+                let (a, b) = c.range();
+                lo = lo.max(a);
+                hi = hi.min(b);
+            }
+        }
+        Ok((lo, hi))
+    }
+}

@@ -1,0 +1,261 @@
+//! The in-memory lookup table: one [`LutCurve`] per grid point (or per grid point of one
+//! shard), in grid order, and the merge of shards into a full table.
+
+use super::error::LutError;
+use super::grid::{LutGrid, Shard};
+use crate::curve::{Curve, CurveParams};
+
+/// The stored part of one simulated curve: per load step h, u_s, a, P and the inner volume
+/// (the contact pressure profiles are not stored, to keep the table small).
+#[derive(Debug, Clone, PartialEq)]
+pub struct LutCurve {
+    /// Flat grid index of the curve.
+    pub index: usize,
+    /// Why the solve failed, if it did (then every vector is empty).
+    pub failure: Option<String>,
+    pub rest_volume_mm3: f64,
+    pub inflated_volume_mm3: f64,
+    pub inflation_apex_mm: f64,
+    pub h_mm: Vec<f64>,
+    pub u_s_mm: Vec<f64>,
+    pub a_mm: Vec<f64>,
+    pub load_n: Vec<f64>,
+    pub volume_mm3: Vec<f64>,
+}
+
+impl LutCurve {
+    /// Keep the stored part of a solver result, checking that it answers the requested
+    /// parameters and is usable (finite numbers, at least two steps, h increasing).
+    pub fn from_curve(
+        index: usize,
+        requested: &CurveParams,
+        curve: &Curve,
+    ) -> Result<Self, String> {
+        if &curve.params != requested {
+            return Err(format!(
+                "solver returned a curve for different parameters: {:?}",
+                curve.params
+            ));
+        }
+        if curve.points.len() < 2 {
+            return Err(format!("only {} load step(s) returned", curve.points.len()));
+        }
+        let scalars = [
+            curve.rest_volume_mm3,
+            curve.inflated_volume_mm3,
+            curve.inflation_apex_mm,
+        ];
+        if scalars.iter().any(|v| !v.is_finite()) {
+            return Err("non-finite volume or inflation displacement".into());
+        }
+        let mut c = Self {
+            index,
+            failure: None,
+            rest_volume_mm3: curve.rest_volume_mm3,
+            inflated_volume_mm3: curve.inflated_volume_mm3,
+            inflation_apex_mm: curve.inflation_apex_mm,
+            h_mm: Vec::with_capacity(curve.points.len()),
+            u_s_mm: Vec::with_capacity(curve.points.len()),
+            a_mm: Vec::with_capacity(curve.points.len()),
+            load_n: Vec::with_capacity(curve.points.len()),
+            volume_mm3: Vec::with_capacity(curve.points.len()),
+        };
+        for (k, p) in curve.points.iter().enumerate() {
+            let v = [p.h_mm, p.u_s_mm, p.a_mm, p.load_n, p.volume_mm3];
+            if v.iter().any(|x| !x.is_finite()) {
+                return Err(format!("non-finite value at step {k} (h = {} mm)", p.h_mm));
+            }
+            if k > 0 && p.h_mm <= curve.points[k - 1].h_mm {
+                return Err(format!("h does not increase at step {k}"));
+            }
+            c.h_mm.push(p.h_mm);
+            c.u_s_mm.push(p.u_s_mm);
+            c.a_mm.push(p.a_mm);
+            c.load_n.push(p.load_n);
+            c.volume_mm3.push(p.volume_mm3);
+        }
+        Ok(c)
+    }
+
+    /// A placeholder recording that curve `index` could not be computed.
+    pub fn failed(index: usize, reason: String) -> Self {
+        Self {
+            index,
+            failure: Some(reason),
+            rest_volume_mm3: 0.0,
+            inflated_volume_mm3: 0.0,
+            inflation_apex_mm: 0.0,
+            h_mm: Vec::new(),
+            u_s_mm: Vec::new(),
+            a_mm: Vec::new(),
+            load_n: Vec::new(),
+            volume_mm3: Vec::new(),
+        }
+    }
+
+    /// Number of load steps stored.
+    pub fn len(&self) -> usize {
+        self.h_mm.len()
+    }
+
+    /// True for a failed curve.
+    pub fn is_empty(&self) -> bool {
+        self.h_mm.is_empty()
+    }
+}
+
+/// A lookup table, or one shard of one.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Lut {
+    pub grid: LutGrid,
+    /// Version of the fem-core crate that computed the curves.
+    pub fem_core_version: String,
+    /// `Some` for a shard file, `None` for a complete table.
+    pub shard: Option<Shard>,
+    /// Curves sorted by grid index: every index of the grid (or of the shard) exactly once.
+    pub curves: Vec<LutCurve>,
+}
+
+impl Lut {
+    /// Version of this fem-core crate, recorded in every table it builds.
+    pub fn this_fem_core_version() -> String {
+        env!("CARGO_PKG_VERSION").to_string()
+    }
+
+    /// The curve with grid index `index`, if this table holds it.
+    pub fn curve(&self, index: usize) -> Option<&LutCurve> {
+        self.curves
+            .binary_search_by_key(&index, |c| c.index)
+            .ok()
+            .map(|k| &self.curves[k])
+    }
+
+    /// Curves whose solve failed.
+    pub fn failures(&self) -> impl Iterator<Item = &LutCurve> {
+        self.curves.iter().filter(|c| c.failure.is_some())
+    }
+
+    /// Check the structural invariants: valid grid, curves sorted, each index of the grid
+    /// (or shard) exactly once, equal-length columns.
+    pub fn validate(&self) -> Result<(), String> {
+        self.grid.validate().map_err(|e| e.to_string())?;
+        let expected: Vec<usize> = (0..self.grid.curve_count())
+            .filter(|&i| self.shard.is_none_or(|s| s.contains(i)))
+            .collect();
+        let got: Vec<usize> = self.curves.iter().map(|c| c.index).collect();
+        if got != expected {
+            return Err(format!(
+                "the table holds curves {} but its grid{} needs {}",
+                summarise(&got),
+                self.shard
+                    .map(|s| format!(" (shard {s})"))
+                    .unwrap_or_default(),
+                summarise(&expected)
+            ));
+        }
+        for c in &self.curves {
+            let n = c.h_mm.len();
+            let lens = [
+                c.u_s_mm.len(),
+                c.a_mm.len(),
+                c.load_n.len(),
+                c.volume_mm3.len(),
+            ];
+            if lens.iter().any(|&l| l != n) {
+                return Err(format!(
+                    "curve {} has columns of different lengths",
+                    c.index
+                ));
+            }
+            if c.failure.is_some() && n != 0 {
+                return Err(format!("failed curve {} holds data", c.index));
+            }
+        }
+        Ok(())
+    }
+}
+
+fn summarise(v: &[usize]) -> String {
+    if v.len() <= 8 {
+        format!("{v:?}")
+    } else {
+        format!(
+            "{} indices ({:?} ... {:?})",
+            v.len(),
+            &v[..3],
+            &v[v.len() - 3..]
+        )
+    }
+}
+
+/// Join shard tables (each with `shard = Some(K/N)`, the same grid, the same fem-core
+/// version, every K in 0..N exactly once) into one complete table. `names` label the shards
+/// in error messages (usually their file names).
+pub fn merge_shards(shards: &[(String, Lut)]) -> Result<Lut, LutError> {
+    let Some((first_name, first)) = shards.first() else {
+        return Err(LutError::Merge("no shard files given".into()));
+    };
+    let Some(first_shard) = first.shard else {
+        return Err(LutError::Merge(format!(
+            "{first_name} is a complete table, not a shard"
+        )));
+    };
+    let count = first_shard.count;
+    let mut seen: Vec<Option<&str>> = vec![None; count];
+    for (name, lut) in shards {
+        let Some(s) = lut.shard else {
+            return Err(LutError::Merge(format!(
+                "{name} is a complete table, not a shard"
+            )));
+        };
+        if s.count != count {
+            return Err(LutError::Merge(format!(
+                "{name} is shard {s} but {first_name} is shard {first_shard}: different N"
+            )));
+        }
+        if lut.grid != first.grid {
+            return Err(LutError::Merge(format!(
+                "{name} was built on a different grid or base parameters than {first_name}"
+            )));
+        }
+        if lut.fem_core_version != first.fem_core_version {
+            return Err(LutError::Merge(format!(
+                "{name} was built by fem-core {} but {first_name} by fem-core {}",
+                lut.fem_core_version, first.fem_core_version
+            )));
+        }
+        if let Some(other) = seen[s.index] {
+            return Err(LutError::Merge(format!(
+                "shard {s} is given twice ({other} and {name})"
+            )));
+        }
+        seen[s.index] = Some(name);
+        lut.validate()
+            .map_err(|e| LutError::Merge(format!("{name}: {e}")))?;
+    }
+    let missing: Vec<String> = seen
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| s.is_none())
+        .map(|(k, _)| format!("{k}/{count}"))
+        .collect();
+    if !missing.is_empty() {
+        return Err(LutError::Merge(format!(
+            "missing shard(s) {}",
+            missing.join(", ")
+        )));
+    }
+    let mut curves: Vec<LutCurve> = shards
+        .iter()
+        .flat_map(|(_, l)| l.curves.iter().cloned())
+        .collect();
+    curves.sort_by_key(|c| c.index);
+    let merged = Lut {
+        grid: first.grid.clone(),
+        fem_core_version: first.fem_core_version.clone(),
+        shard: None,
+        curves,
+    };
+    merged.validate().map_err(LutError::Merge)?;
+    Ok(merged)
+}

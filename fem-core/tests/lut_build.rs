@@ -1,0 +1,213 @@
+//! LUT build pipeline with the analytic stand-in (test fixture, see `lut_common`): shards
+//! and merge reproduce a single-process build bit for bit, the file format round-trips, and
+//! damaged, edited or foreign files are rejected with errors naming the file.
+
+// Test helpers outside #[test] functions may unwrap too (COMMON.md: tests may unwrap).
+#![allow(clippy::unwrap_used)]
+
+mod lut_common;
+
+use fem_core::lut::{
+    Lut, LutError, LutGrid, Shard, build_lut, merge_shards, read_lut, read_lut_bytes, write_lut,
+    write_lut_bytes,
+};
+use fem_core::{CurveParams, MaterialLaw};
+use lut_common::standin_solver;
+
+fn grid() -> LutGrid {
+    let base = CurveParams {
+        steps: 12,
+        ..CurveParams::default()
+    };
+    let mut g = LutGrid::with_axes(
+        "test",
+        base,
+        vec![10.0, 31.6, 100.0, 316.0, 1000.0],
+        vec![0.0, 6.0, 15.0],
+    );
+    g.effects.friction = vec![0.0, 0.3];
+    g
+}
+
+fn quiet(_: &fem_core::lut::CurveReport) {}
+
+fn full_build() -> Lut {
+    build_lut(&grid(), None, &standin_solver, &quiet).unwrap()
+}
+
+#[test]
+fn shards_merge_to_the_single_process_build_bit_for_bit() {
+    let full = write_lut_bytes(&full_build()).unwrap();
+    for n in [1, 3, 4, 7] {
+        let shards: Vec<(String, Lut)> = (0..n)
+            .rev() // merge order must not matter
+            .map(|k| {
+                let s = Shard { index: k, count: n };
+                let lut = build_lut(&grid(), Some(s), &standin_solver, &quiet).unwrap();
+                // every shard survives its own file round trip
+                let (bytes, _) = write_lut_bytes(&lut).unwrap();
+                let (back, _) = read_lut_bytes(&bytes, "shard").unwrap();
+                (format!("shard{k}"), back)
+            })
+            .collect();
+        let merged = merge_shards(&shards).unwrap();
+        assert!(merged.shard.is_none());
+        assert_eq!(write_lut_bytes(&merged).unwrap(), full, "N = {n}");
+    }
+}
+
+#[test]
+fn shards_hold_every_nth_curve() {
+    let s = Shard { index: 1, count: 4 };
+    let lut = build_lut(&grid(), Some(s), &standin_solver, &quiet).unwrap();
+    let idx: Vec<usize> = lut.curves.iter().map(|c| c.index).collect();
+    assert_eq!(
+        idx,
+        (0..grid().curve_count())
+            .filter(|i| i % 4 == 1)
+            .collect::<Vec<_>>()
+    );
+}
+
+#[test]
+fn merge_rejects_missing_duplicate_and_foreign_shards() {
+    let build = |k, n, g: &LutGrid| {
+        build_lut(
+            g,
+            Some(Shard { index: k, count: n }),
+            &standin_solver,
+            &quiet,
+        )
+        .unwrap()
+    };
+    let g = grid();
+    let err = merge_shards(&[("a".into(), build(0, 2, &g))]).unwrap_err();
+    assert!(err.to_string().contains("missing shard(s) 1/2"), "{err}");
+    let err =
+        merge_shards(&[("a".into(), build(0, 2, &g)), ("b".into(), build(0, 2, &g))]).unwrap_err();
+    assert!(err.to_string().contains("given twice (a and b)"), "{err}");
+    let mut other = g.clone();
+    other.base.steps = 13;
+    let err = merge_shards(&[
+        ("a".into(), build(0, 2, &g)),
+        ("b".into(), build(1, 2, &other)),
+    ])
+    .unwrap_err();
+    assert!(
+        err.to_string().contains("b was built on a different grid"),
+        "{err}"
+    );
+    let err = merge_shards(&[("full".into(), full_build())]).unwrap_err();
+    assert!(
+        err.to_string().contains("full is a complete table"),
+        "{err}"
+    );
+}
+
+#[test]
+fn file_round_trip_is_exact_and_repeatable() {
+    let lut = full_build();
+    let dir = std::env::temp_dir().join(format!("lut_build_rt_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("t.lut");
+    let hash = write_lut(&path, &lut).unwrap();
+    let (back, header) = read_lut(&path).unwrap();
+    assert_eq!(back, lut);
+    assert_eq!(header.grid, grid());
+    assert_eq!(header.mesh.mesh_level, 0);
+    assert_eq!(header.fem_core_version, env!("CARGO_PKG_VERSION"));
+    // writing what was read gives the same bytes and hash (no timestamps, fixed order)
+    let (bytes2, hash2) = write_lut_bytes(&back).unwrap();
+    assert_eq!(hash2, hash);
+    assert_eq!(bytes2, std::fs::read(&path).unwrap());
+    // the header is self-describing JSON carrying every base parameter
+    let text = String::from_utf8_lossy(&bytes2);
+    let json_line = text.lines().nth(2).unwrap();
+    let v: serde_json::Value = serde_json::from_str(json_line).unwrap();
+    assert_eq!(v["grid"]["base"]["shell_modulus_kpa"], 2300.0);
+    assert_eq!(v["grid"]["effects"]["friction"][1], 0.3);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn a_changed_byte_anywhere_is_a_hash_mismatch_naming_the_file() {
+    let (bytes, _) = write_lut_bytes(&full_build()).unwrap();
+    let header_start = bytes
+        .iter()
+        .enumerate()
+        .filter(|(_, b)| **b == b'\n')
+        .nth(1)
+        .unwrap()
+        .0
+        + 1;
+    for pos in [header_start + 10, bytes.len() / 2, bytes.len() - 1] {
+        let mut bad = bytes.clone();
+        bad[pos] ^= 0x01;
+        match read_lut_bytes(&bad, "damaged.lut") {
+            Err(e @ LutError::HashMismatch { .. }) => {
+                let msg = e.to_string();
+                assert!(
+                    msg.starts_with("damaged.lut: content hash mismatch"),
+                    "{msg}"
+                );
+            }
+            other => panic!("byte {pos}: expected a hash mismatch, got {other:?}"),
+        }
+    }
+    // truncation is detected too
+    let err = read_lut_bytes(&bytes[..bytes.len() - 8], "cut.lut").unwrap_err();
+    assert!(matches!(err, LutError::HashMismatch { .. }), "{err}");
+}
+
+#[test]
+fn wrong_version_and_foreign_files_are_rejected_clearly() {
+    let (bytes, _) = write_lut_bytes(&full_build()).unwrap();
+    let text_end = bytes.iter().position(|&b| b == b'\n').unwrap();
+    let mut v2 = b"tactile-lut 2".to_vec();
+    v2.extend_from_slice(&bytes[text_end..]);
+    let err = read_lut_bytes(&v2, "future.lut").unwrap_err().to_string();
+    assert_eq!(
+        err,
+        "future.lut: LUT format version 2 is not supported (this build reads version 1)"
+    );
+    let err = read_lut_bytes(b"u_s_mm,a_mm\n0,0\n", "curve.csv")
+        .unwrap_err()
+        .to_string();
+    assert!(err.starts_with("curve.csv: not a valid LUT file"), "{err}");
+    let err = read_lut(std::path::Path::new("/nonexistent/x.lut"))
+        .unwrap_err()
+        .to_string();
+    assert!(err.starts_with("/nonexistent/x.lut: "), "{err}");
+}
+
+#[test]
+fn failed_solves_are_recorded_not_fatal() {
+    let fails_when_soft = |p: &CurveParams| {
+        if p.sample_modulus_kpa < 20.0 && p.pressure_kpa == 6.0 {
+            Err("did not converge".to_string())
+        } else {
+            standin_solver(p)
+        }
+    };
+    let lut = build_lut(&grid(), None, &fails_when_soft, &quiet).unwrap();
+    let failed: Vec<usize> = lut.failures().map(|c| c.index).collect();
+    assert_eq!(failed.len(), 2); // E2 = 10 kPa, p = 6 kPa, both friction values
+    let (bytes, _) = write_lut_bytes(&lut).unwrap();
+    let (back, _) = read_lut_bytes(&bytes, "f.lut").unwrap();
+    assert_eq!(back, lut);
+    assert_eq!(
+        back.curve(failed[0]).unwrap().failure.as_deref(),
+        Some("did not converge")
+    );
+}
+
+#[test]
+fn solver_answering_other_parameters_is_a_failure() {
+    let wrong = |p: &CurveParams| {
+        let mut c = standin_solver(p)?;
+        c.params.material = MaterialLaw::Linear;
+        Ok::<_, String>(c)
+    };
+    let lut = build_lut(&grid(), None, &wrong, &quiet).unwrap();
+    assert_eq!(lut.failures().count(), grid().curve_count());
+}

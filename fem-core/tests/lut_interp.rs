@@ -1,0 +1,287 @@
+//! Interpolation of a table built with the analytic stand-in (test fixture, see
+//! `lut_common`): at fixed (p_air, u_s) its contact radius is exactly a Hertz-like
+//! a = C' E2^(-1/3), linear in p_air, and sqrt(0.2 mm + u_s) along u_s, so the table's
+//! interpolant can be compared with the closed form everywhere, not only at nodes.
+
+// Test helpers outside #[test] functions may unwrap too (COMMON.md: tests may unwrap).
+#![allow(clippy::unwrap_used)]
+
+mod lut_common;
+
+use fem_core::CurveParams;
+use fem_core::lut::{
+    EffectSelection, Lut, LutError, LutGrid, LutQuery, OutOfRange, build_lut, grid::log_spaced,
+};
+use lut_common::{standin_a_mm, standin_solver};
+
+fn table(per_decade: usize) -> Lut {
+    let base = CurveParams {
+        steps: 40,
+        ..CurveParams::default()
+    };
+    let g = LutGrid::with_axes(
+        "interp-test",
+        base,
+        log_spaced(10.0, 1000.0, 2 * per_decade + 1),
+        vec![0.0, 6.0, 10.0, 15.0, 20.0, 30.0],
+    );
+    build_lut(&g, None, &standin_solver, &|_| {}).unwrap()
+}
+
+/// Max relative errors of a and of d a / d ln E2 over a sweep of off-node queries.
+fn sweep_errors(lut: &Lut) -> (f64, f64) {
+    let slice = lut.slice(&EffectSelection::default()).unwrap();
+    let (mut err_a, mut err_d) = (0.0f64, 0.0f64);
+    for ie in 0..=97 {
+        let e = 10f64.powf(1.0 + 2.0 * ie as f64 / 97.0);
+        for p in [0.0, 3.0, 6.0, 12.5, 30.0] {
+            let (lo, hi) = slice.u_s_range_mm(e, p).unwrap();
+            for iu in 0..=13 {
+                let u = (lo + (hi - lo) * iu as f64 / 13.0).min(hi);
+                let s = slice
+                    .sample(
+                        &LutQuery {
+                            modulus_kpa: e,
+                            pressure_kpa: p,
+                            u_s_mm: u,
+                        },
+                        OutOfRange::Error,
+                    )
+                    .unwrap();
+                assert!(!s.clamped);
+                let exact = standin_a_mm(e, p, u);
+                err_a = err_a.max((s.a_mm / exact - 1.0).abs());
+                // d a / d ln E = -a / 3 for a ~ E^(-1/3)
+                err_d = err_d.max((s.da_dln_modulus_mm / (-exact / 3.0) - 1.0).abs());
+            }
+        }
+    }
+    (err_a, err_d)
+}
+
+#[test]
+fn reproduces_a_hertz_like_modulus_dependence() {
+    let (err_a, err_d) = sweep_errors(&table(6));
+    // PCHIP with Fritsch–Butland slopes is third-order accurate on smooth data (slope error
+    // O(dx^2), Fritsch & Carlson 1980): for f = exp(-x/3) on dx = ln(10)/6 that alone is
+    // ~1e-4. Near the u_s limit of the softer outer neighbour, that neighbour is continued
+    // linearly in u_s (see `interp`), which makes the scheme second order there: measured
+    // 3.9e-4 for a and 1.5e-2 for d a / d ln E2 (the derivative of a cubic Hermite loses one
+    // order). Tolerances: a factor ~2.5 and 2 above the measurements.
+    println!("6 per decade: max rel error a {err_a:.2e}, da/dlnE {err_d:.2e}");
+    assert!(err_a < 1e-3, "a: {err_a}");
+    assert!(err_d < 3e-2, "da/dlnE: {err_d}");
+}
+
+#[test]
+fn error_shrinks_at_least_quadratically_with_the_spacing() {
+    let (e6, _) = sweep_errors(&table(6));
+    let (e12, _) = sweep_errors(&table(12));
+    println!(
+        "6 per decade {e6:.2e}, 12 per decade {e12:.2e}, ratio {:.1}",
+        e6 / e12
+    );
+    // second order overall (see above): halving the spacing divides the error by ~4
+    // (measured 3.9); 3.5 would already fail for a first-order scheme (ratio 2).
+    assert!(e6 / e12 > 3.5, "ratio {}", e6 / e12);
+}
+
+#[test]
+fn interpolant_is_continuous_in_u_s_where_a_neighbour_curve_ends() {
+    let lut = table(6);
+    let slice = lut.slice(&EffectSelection::default()).unwrap();
+    // at E2 = 827 kPa the bracketing nodes are 681 and 1000 kPa; the outer neighbour
+    // 464 kPa ends at u_s = 2 * 464 / 764 = 1.215 mm (p_air = 0)
+    let end = lut.curve(10).unwrap().u_s_mm.last().copied().unwrap();
+    assert_eq!(lut.grid.modulus_kpa[10], 464.2);
+    let at = |u: f64| {
+        slice
+            .sample(
+                &LutQuery {
+                    modulus_kpa: 827.0,
+                    pressure_kpa: 0.0,
+                    u_s_mm: u,
+                },
+                OutOfRange::Error,
+            )
+            .unwrap()
+            .a_mm
+    };
+    let (l, r) = (at(end - 1e-9), at(end + 1e-9));
+    assert!((l - r).abs() < 1e-8, "jump {} at u_s = {end}", l - r);
+}
+
+#[test]
+fn interpolant_is_continuous_across_nodes_and_exact_on_them() {
+    let lut = table(6);
+    let slice = lut.slice(&EffectSelection::default()).unwrap();
+    let q = |e: f64, p: f64| {
+        slice
+            .sample(
+                &LutQuery {
+                    modulus_kpa: e,
+                    pressure_kpa: p,
+                    u_s_mm: 0.05,
+                },
+                OutOfRange::Error,
+            )
+            .unwrap()
+    };
+    for &node in &lut.grid.modulus_kpa[1..lut.grid.modulus_kpa.len() - 1] {
+        let (l, r) = (q(node * (1.0 - 1e-9), 6.0), q(node * (1.0 + 1e-9), 6.0));
+        assert!((l.a_mm - r.a_mm).abs() < 1e-8, "value jump at {node}");
+        // C1: the derivative is continuous too
+        assert!(
+            (l.da_dln_modulus_mm - r.da_dln_modulus_mm).abs() < 1e-6,
+            "slope jump at {node}"
+        );
+    }
+    // on a node (E2 and p_air on the grid) the value is the curve's own interpolant along
+    // u_s: compare with the stand-in (only the 40-step u_s interpolation error remains).
+    let s = q(100.0, 15.0);
+    assert!((s.a_mm / standin_a_mm(100.0, 15.0, 0.05) - 1.0).abs() < 1e-5);
+}
+
+#[test]
+fn a_decreases_monotonically_with_modulus() {
+    let lut = table(6);
+    let slice = lut.slice(&EffectSelection::default()).unwrap();
+    let mut prev = f64::INFINITY;
+    for i in 0..=400 {
+        let e = 10.0 * (1000.0f64 / 10.0).powf(i as f64 / 400.0);
+        let s = slice
+            .sample(
+                &LutQuery {
+                    modulus_kpa: e,
+                    pressure_kpa: 10.0,
+                    u_s_mm: 0.06,
+                },
+                OutOfRange::Error,
+            )
+            .unwrap();
+        assert!(s.a_mm < prev && s.da_dln_modulus_mm < 0.0);
+        prev = s.a_mm;
+    }
+}
+
+#[test]
+fn out_of_range_is_an_error_or_an_explicit_clamp() {
+    let lut = table(6);
+    let slice = lut.slice(&EffectSelection::default()).unwrap();
+    let q = LutQuery {
+        modulus_kpa: 5.0,
+        pressure_kpa: 6.0,
+        u_s_mm: 0.01,
+    };
+    match slice.sample(&q, OutOfRange::Error) {
+        Err(LutError::OutOfRange {
+            axis: "modulus_kpa",
+            min,
+            max,
+            ..
+        }) => {
+            assert_eq!((min, max), (10.0, 1000.0));
+        }
+        other => panic!("{other:?}"),
+    }
+    let clamped = slice.sample(&q, OutOfRange::Clamp).unwrap();
+    let at_edge = slice
+        .sample(
+            &LutQuery {
+                modulus_kpa: 10.0,
+                ..q
+            },
+            OutOfRange::Error,
+        )
+        .unwrap();
+    assert!(clamped.clamped && !at_edge.clamped);
+    assert_eq!(clamped.a_mm, at_edge.a_mm);
+
+    let err = slice
+        .sample(
+            &LutQuery {
+                modulus_kpa: 100.0,
+                pressure_kpa: 31.0,
+                u_s_mm: 0.1,
+            },
+            OutOfRange::Error,
+        )
+        .unwrap_err();
+    assert!(
+        matches!(
+            err,
+            LutError::OutOfRange {
+                axis: "pressure_kpa",
+                ..
+            }
+        ),
+        "{err}"
+    );
+    // soft samples reach only a small u_s: beyond the softer bracketing curve's range
+    let (_, hi) = slice.u_s_range_mm(12.0, 6.0).unwrap();
+    let err = slice
+        .sample(
+            &LutQuery {
+                modulus_kpa: 12.0,
+                pressure_kpa: 6.0,
+                u_s_mm: hi * 1.01,
+            },
+            OutOfRange::Error,
+        )
+        .unwrap_err();
+    assert!(
+        matches!(err, LutError::OutOfRange { axis: "u_s_mm", .. }),
+        "{err}"
+    );
+    let s = slice
+        .sample(
+            &LutQuery {
+                modulus_kpa: 12.0,
+                pressure_kpa: 6.0,
+                u_s_mm: hi * 1.01,
+            },
+            OutOfRange::Clamp,
+        )
+        .unwrap();
+    assert!(s.clamped);
+}
+
+#[test]
+fn a_failed_neighbour_curve_is_reported_by_name() {
+    let fails = |p: &CurveParams| {
+        if p.sample_modulus_kpa == 100.0 && p.pressure_kpa == 6.0 {
+            Err("did not converge".to_string())
+        } else {
+            standin_solver(p)
+        }
+    };
+    let g = table(6).grid;
+    let lut = build_lut(&g, None, &fails, &|_| {}).unwrap();
+    let slice = lut.slice(&EffectSelection::default()).unwrap();
+    let err = slice
+        .sample(
+            &LutQuery {
+                modulus_kpa: 90.0,
+                pressure_kpa: 6.0,
+                u_s_mm: 0.1,
+            },
+            OutOfRange::Error,
+        )
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("E2=100 kPa p_air=6 kPa") && err.contains("did not converge"),
+        "{err}"
+    );
+    // away from the failed curve the table still answers
+    slice
+        .sample(
+            &LutQuery {
+                modulus_kpa: 300.0,
+                pressure_kpa: 6.0,
+                u_s_mm: 0.1,
+            },
+            OutOfRange::Error,
+        )
+        .unwrap();
+}
