@@ -55,6 +55,8 @@ pub struct ControllerConfig {
     pub setpoint_slew_kpa_per_s: f32,
     pub overpressure_limit_kpa: f32,
     pub heartbeat_timeout_ms: u32,
+    /// 0 disables the stuck-manometer check (only for simulators whose sensor model has
+    /// no noise; a real oversampled ADC always has some).
     pub manometer_stuck_ms: u32,
     pub load_cell_timeout_ms: u32,
 }

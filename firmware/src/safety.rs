@@ -149,7 +149,9 @@ impl Supervisor {
             // Hysteresis: still too close to the limit to call the cause gone.
             causes |= FaultFlags::OVERPRESSURE;
         }
-        if now_us.saturating_sub(self.manometer_changed_us) >= l.manometer_stuck_us {
+        if l.manometer_stuck_us > 0
+            && now_us.saturating_sub(self.manometer_changed_us) >= l.manometer_stuck_us
+        {
             causes |= FaultFlags::MANOMETER_STUCK;
         }
         if let Some(last) = self.last_request_us

@@ -294,3 +294,14 @@ fn faults_show_in_every_sample_status() {
     // 1 kHz for 20 ms before and ~50 ms after the trip (the last block may still be open).
     assert!(before >= 19 && after >= 40, "{before} {after}");
 }
+
+#[test]
+fn stuck_check_can_be_disabled_for_noiseless_simulators() {
+    let mut bench = Bench::with_config(ControllerConfig {
+        manometer_stuck_ms: 0,
+        ..ControllerConfig::default()
+    });
+    bench.manometer_fault = ManometerFault::Stuck(manometer_counts(0.0));
+    bench.run_quiet_ms(2000);
+    assert!(bench.ctl.faults().is_empty());
+}
