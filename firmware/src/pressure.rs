@@ -80,12 +80,19 @@ impl PressureControl {
     }
 
     /// Regulates to `setpoint_kpa`; closes the vent (regulating against an open vent would
-    /// only saturate the pump). From another mode this is a bumpless transfer starting at
-    /// the measured pressure.
+    /// only saturate the pump). The setpoint ramp starts at the measured pressure. From
+    /// manual mode the transfer is bumpless (the PID continues from the manual duty); from
+    /// off, the stopped pump's zero duty means nothing, so the PID starts from its
+    /// feed-forward with an empty integral.
     pub fn regulate(&mut self, setpoint_kpa: f32, measured_kpa: f32, now_us: u64) {
         if self.mode != PressureMode::Regulating {
             self.ramped_setpoint_kpa = measured_kpa;
-            self.pid.start(self.duty, measured_kpa, measured_kpa);
+            let from_duty = if self.mode == PressureMode::Manual {
+                self.duty
+            } else {
+                self.pid.gains().feed_forward_per_kpa * measured_kpa
+            };
+            self.pid.start(from_duty, measured_kpa, measured_kpa);
             self.mode = PressureMode::Regulating;
             self.next_control_us = now_us;
             self.last_control_us = now_us;

@@ -143,7 +143,7 @@ impl Streamer {
         if now_us >= self.next_due_us {
             self.take_sample(now_us, tick);
             // Next due instant after `now_us` on the exact grid start + k/rate.
-            let elapsed = now_us - self.start_us;
+            let elapsed = now_us.saturating_sub(self.start_us);
             let rate = u64::from(self.rate_hz);
             self.next_index = (self.next_index + 1).max(elapsed * rate / 1_000_000 + 1);
             self.next_due_us = self.start_us + (self.next_index * 1_000_000).div_ceil(rate);

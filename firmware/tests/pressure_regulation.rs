@@ -156,3 +156,27 @@ fn rejects_a_sudden_volume_shrink() {
         assert_eq!(bench.ctl.faults(), FaultFlags(0));
     }
 }
+
+#[test]
+fn regulating_again_after_pressure_off_recovers_quickly() {
+    let mut bench = Bench::new();
+    step_response(&mut bench, 15.0);
+    bench.ack(Request::PressureOff);
+    bench.run_quiet_ms(100);
+    let dropped = bench.plant.pressure_kpa;
+    assert!(dropped < 14.0, "{dropped}");
+    // Back to 15 kPa from ~13 kPa: the PID starts from its feed-forward (settles in 0.07 s
+    // here). A PID that took over the stopped pump's zero duty "bumplessly" would start
+    // with an integral of -Kff*13 kPa and creep back at Ki/Kp (0.37 s here): 0.2 s tells
+    // them apart.
+    let r = step_response(&mut bench, 15.0);
+    println!(
+        "re-regulating from {dropped:.2} kPa: settling {:.3} s",
+        r.settling_s
+    );
+    assert!(
+        r.settling_s <= 0.2 && r.overshoot_pct <= 5.0,
+        "{:.3} s",
+        r.settling_s
+    );
+}
