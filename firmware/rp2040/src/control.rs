@@ -13,6 +13,9 @@ use crate::shared::{LOAD_CONVERSION, PENDING_STEPS, STEPPER_ENABLE, STEPS_READY,
 pub const WATCHDOG_TIMEOUT: Duration = Duration::from_millis(100);
 /// Time between the Ack of `EnterBootloader` (queued for USB) and the reboot.
 const REBOOT_GRACE: Duration = Duration::from_millis(50);
+/// How often the longest tick (sampling + controller) is logged: the CPU budget on the
+/// bench is read from this line.
+const TIMING_LOG_PERIOD: Duration = Duration::from_secs(10);
 
 #[embassy_executor::task]
 pub async fn control_task(
@@ -23,6 +26,8 @@ pub async fn control_task(
     let mut ticker = Ticker::every(Duration::from_micros(u64::from(TICK_PERIOD_US)));
     let mut stepper_enabled = false;
     let mut reboot_at: Option<Instant> = None;
+    let mut longest_tick = Duration::from_ticks(0);
+    let mut next_timing_log = Instant::now() + TIMING_LOG_PERIOD;
     loop {
         ticker.next().await;
         let now = Instant::now();
@@ -39,6 +44,17 @@ pub async fn control_task(
             )
         });
         actuators.apply(out.pump_duty_per_10k, out.led_duty_per_10k, out.vent_open);
+        longest_tick = longest_tick.max(Instant::now() - now);
+        if now >= next_timing_log {
+            defmt::info!(
+                "longest control tick over {} s: {} us of {} us",
+                TIMING_LOG_PERIOD.as_secs(),
+                longest_tick.as_micros(),
+                TICK_PERIOD_US
+            );
+            longest_tick = Duration::from_ticks(0);
+            next_timing_log = now + TIMING_LOG_PERIOD;
+        }
         if out.stage.steps != 0 || out.stage.enable != stepper_enabled {
             stepper_enabled = out.stage.enable;
             PENDING_STEPS.lock(|p| p.set(p.get().saturating_add(out.stage.steps)));
