@@ -17,6 +17,23 @@
 //! (sample blocks), [`pid`], [`pressure`] (off / regulating / manual, vent), [`stage`]
 //! (trapezoidal step generation), [`safety`] (the latched-fault supervisor), and
 //! [`controller`] / [`dispatch`] which tie them together.
+//!
+//! # Driving it (board layer or simulator)
+//!
+//! - Call `tick` every [`TICK_PERIOD_US`] (2 kHz) with a monotonic device time in µs; the
+//!   stream rate cannot exceed the tick rate. The PID runs on every tick at or after its
+//!   1 ms period, so a 1 kHz caller also works (streams up to 1 kHz).
+//! - Apply `Outputs` at once. `stage.steps` is the motion of the tick that just ended: emit
+//!   that many step pulses spread over the next tick period (a simulator may simply add
+//!   them to its motor position). Positive steps mean the DIR pin high.
+//! - Call `handle` for every decoded request (same clock as `tick`) and send its reply
+//!   before anything `poll_outgoing` returns afterwards; report undecodable frames with
+//!   `note_rx_error`, a watchdog reset at boot with `note_watchdog_reset`.
+//! - Sensor models must carry noise: an oversampled manometer reading that stays identical
+//!   to the count for 250 ms trips `MANOMETER_STUCK` (set
+//!   [`ControllerConfig::manometer_stuck_ms`] to 0 only for a noiseless model).
+//! - The heartbeat (1 s) is armed by the first request: a host must then keep sending
+//!   requests (`Heartbeat`, `Ping`, anything) or the pump stops and the stage halts.
 #![no_std]
 
 pub mod controller;
