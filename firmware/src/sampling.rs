@@ -23,8 +23,8 @@ impl Oversampler {
     /// Adds one 12-bit conversion (bits above 12 are ignored: the RP2040 sets bit 15 on a
     /// conversion error, which must not leak into the sum).
     pub fn push(&mut self, raw_12bit: u16) {
-        self.sum += u32::from(raw_12bit & 0x0fff);
-        self.count += 1;
+        self.sum = self.sum.saturating_add(u32::from(raw_12bit & 0x0fff));
+        self.count = self.count.saturating_add(1);
     }
 
     /// Conversions accumulated so far.
@@ -39,9 +39,11 @@ impl Oversampler {
         if self.count == 0 {
             return None;
         }
-        let scaled = (self.sum * OVERSAMPLE_COUNT + self.count / 2) / self.count;
+        let scaled = (u64::from(self.sum) * u64::from(OVERSAMPLE_COUNT)
+            + u64::from(self.count / 2))
+            / u64::from(self.count);
         *self = Self::new();
-        Some(scaled.min(u32::from(u16::MAX)) as u16)
+        Some(scaled.min(u64::from(u16::MAX)) as u16)
     }
 }
 
@@ -50,7 +52,7 @@ impl Oversampler {
 /// (an anti-aliasing filter), not a single decimated reading.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct ReadingAverager {
-    sum: u32,
+    sum: u64,
     count: u32,
 }
 
@@ -60,8 +62,8 @@ impl ReadingAverager {
     }
 
     pub fn add(&mut self, counts: u16) {
-        self.sum += u32::from(counts);
-        self.count += 1;
+        self.sum += u64::from(counts);
+        self.count = self.count.saturating_add(1);
     }
 
     /// Rounded mean since the last take, then restarts; `None` when empty.
@@ -69,8 +71,10 @@ impl ReadingAverager {
         if self.count == 0 {
             return None;
         }
-        let mean = (self.sum + self.count / 2) / self.count;
+        let n = u64::from(self.count);
+        let mean = (self.sum + n / 2) / n;
         *self = Self::new();
+        // The mean of u16 values is a u16.
         Some(mean as u16)
     }
 }

@@ -128,17 +128,17 @@ impl Stage {
         }
         let speed = self.velocity.abs();
         let stopping = (speed * speed / (2.0 * self.accel) + 1.0 - self.fraction.abs()) as i32;
-        let direction: i32 = if self.velocity >= 0.0 { 1 } else { -1 };
-        let stop_at = self
-            .position_steps
-            .saturating_add(direction * stopping)
-            .clamp(self.min_steps, self.max_steps);
+        let direction: i64 = if self.velocity >= 0.0 { 1 } else { -1 };
+        let stop_at = (i64::from(self.position_steps) + direction * i64::from(stopping))
+            .clamp(i64::from(self.min_steps), i64::from(self.max_steps));
         // Keep the current target when it lies ahead and closer than the stop point (the
         // move ends there anyway); otherwise stop at the stopping distance.
-        let target_ahead = (self.target_steps - self.position_steps) * direction >= 0;
-        let target_closer = (stop_at - self.target_steps) * direction > 0;
+        let target = i64::from(self.target_steps);
+        let target_ahead = (target - i64::from(self.position_steps)) * direction >= 0;
+        let target_closer = (stop_at - target) * direction > 0;
         if !(target_ahead && target_closer) {
-            self.target_steps = stop_at;
+            // Clamped into the i32 soft limits above.
+            self.target_steps = stop_at as i32;
         }
     }
 
@@ -182,7 +182,8 @@ impl Stage {
         }
         let Some(last) = last else { return 0 };
         let dt = (now_us.saturating_sub(last) as f32 * 1e-6).min(0.01);
-        let to_target = self.target_steps - self.position_steps;
+        // i64: limits may span the whole i32 range, whose difference does not fit an i32.
+        let to_target = i64::from(self.target_steps) - i64::from(self.position_steps);
         if to_target == 0 {
             self.arrive();
             return 0;
@@ -214,18 +215,20 @@ impl Stage {
         };
         self.velocity = new_speed * direction;
         self.fraction += 0.5 * (speed + new_speed) * dt * direction;
-        let mut steps = self.fraction as i32; // towards zero
+        // Towards zero; a tick moves at most 16000 steps/s * 10 ms, far inside i32.
+        let mut steps = i64::from(self.fraction as i32);
         if steps * to_target.signum() >= to_target * to_target.signum() {
             steps = to_target;
             self.fraction = 0.0;
         } else {
             self.fraction -= steps as f32;
         }
-        self.position_steps += steps;
+        // position + steps lies between position and target, both i32.
+        self.position_steps = (i64::from(self.position_steps) + steps) as i32;
         if self.position_steps == self.target_steps {
             self.arrive();
         }
-        steps
+        steps as i32
     }
 
     fn arrive(&mut self) {

@@ -167,3 +167,30 @@ fn stop_at_rest_and_stop_before_target_keep_the_closer_point() {
     stage.stop();
     assert_eq!(stage.target_steps(), 10_000);
 }
+
+#[test]
+fn full_i32_range_does_not_overflow() {
+    let mut stage = Stage::new();
+    stage.set_limits(i32::MIN, i32::MAX).unwrap();
+    stage.set_position(i32::MIN).unwrap();
+    stage.move_to(i32::MAX, 16_000, 160_000).unwrap();
+    let mut t = 0;
+    stage.tick(t);
+    for _ in 0..200 {
+        t += 500;
+        assert!(stage.tick(t) >= 0);
+    }
+    stage.stop();
+    while stage.is_moving() {
+        t += 500;
+        stage.tick(t);
+    }
+    // 0.1 s of acceleration to full speed (800 steps) then 800 steps of braking.
+    let travelled = i64::from(stage.position_steps()) - i64::from(i32::MIN);
+    assert!((1500..=1700).contains(&travelled), "{travelled}");
+    stage.move_to(i32::MIN, 16_000, 160_000).unwrap();
+    for _ in 0..100 {
+        t += 500;
+        assert!(stage.tick(t) <= 0);
+    }
+}
