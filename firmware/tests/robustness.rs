@@ -55,7 +55,7 @@ fn random_request(rng: &mut Rng) -> Request {
             duty_per_10k: rng.pick(&u16s),
         },
         6 => Request::Vent {
-            open: rng.next() % 2 == 0,
+            open: rng.next().is_multiple_of(2),
         },
         7 => Request::SetPidGains(PidGains {
             kp: rng.pick(&f32s),
@@ -100,7 +100,7 @@ fn random_sequences_never_panic_and_always_reply_once() {
         let mut now = 0u64;
         for step in 0..5000u32 {
             // Mostly regular ticks, sometimes a stall of up to 50 ms.
-            now += if rng.next() % 100 == 0 {
+            now += if rng.next().is_multiple_of(100) {
                 rng.next() % 50_000
             } else {
                 500
@@ -110,7 +110,7 @@ fn random_sequences_never_panic_and_always_reply_once() {
                 manometer_counts: rng
                     .pick(&[0, 6554, 12_000, 20_000, 30_000, u16::MAX])
                     .wrapping_add((rng.next() % 5) as u16),
-                load_counts: if rng.next() % 20 == 0 {
+                load_counts: if rng.next().is_multiple_of(20) {
                     Some(rng.pick(&[0, 1, -1, 8_388_607, -8_388_608]))
                 } else {
                     None
@@ -121,7 +121,7 @@ fn random_sequences_never_panic_and_always_reply_once() {
                 assert_eq!(out.pump_duty_per_10k, 0, "run {run} step {step}");
             }
             assert!(out.pump_duty_per_10k <= 10_000 && out.led_duty_per_10k <= 10_000);
-            if rng.next() % 4 == 0 {
+            if rng.next().is_multiple_of(4) {
                 let seq = rng.next() as u16;
                 let request = random_request(&mut rng);
                 let reply = ctl.handle(&RequestFrame { seq, request }, now);
