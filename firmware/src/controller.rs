@@ -169,6 +169,7 @@ impl Controller {
                 manometer_counts: inputs.manometer_counts,
                 pressure_kpa: self.pressure_kpa,
                 load_silent_us: self.load.silent_for_us(now_us),
+                actuating: self.pressure.mode() != PressureMode::Off || self.stage.is_moving(),
             },
         );
         self.apply_fault_actions(new);

@@ -59,7 +59,8 @@ pub const STAGE_DEFAULT_LIMIT_STEPS: i32 = 160_000;
 pub const OVERPRESSURE_LIMIT_KPA: f32 = 20.0;
 /// Highest setpoint accepted: 2 kPa of margin below the hard limit.
 pub const MAX_SETPOINT_KPA: f32 = 18.0;
-/// Heartbeat timeout: no request for this long stops the pump and the stage.
+/// Heartbeat timeout: no request for this long while the pump runs or the stage moves
+/// stops both.
 pub const HEARTBEAT_TIMEOUT_MS: u32 = 1000;
 /// A manometer reading that does not change by a single count for this long is stuck
 /// (the sum of 16 conversions of a live 12-bit ADC always carries a few counts of noise).

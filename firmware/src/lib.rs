@@ -32,8 +32,9 @@
 //! - Sensor models must carry noise: an oversampled manometer reading that stays identical
 //!   to the count for 250 ms trips `MANOMETER_STUCK` (set
 //!   [`ControllerConfig::manometer_stuck_ms`] to 0 only for a noiseless model).
-//! - The heartbeat (1 s) is armed by the first request: a host must then keep sending
-//!   requests (`Heartbeat`, `Ping`, anything) or the pump stops and the stage halts.
+//! - Heartbeat (1 s): while the pump runs or the stage moves, a host must keep sending
+//!   requests (`Heartbeat`, `Ping`, anything) or the pump stops, the stage halts and
+//!   `HEARTBEAT_LOST` latches. A quiet host with nothing running trips nothing.
 #![no_std]
 
 pub mod controller;

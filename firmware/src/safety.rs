@@ -6,9 +6,14 @@
 //! | `OVERPRESSURE`     | gauge pressure above the hard limit                     | pump off, vent open, stage stops    | pressure 2 kPa below the limit    |
 //! | `MANOMETER_RANGE`  | counts outside the sensor's 5..95 % output window       | pump off, vent open, stage stops    | reading back inside the window    |
 //! | `MANOMETER_STUCK`  | the reading has not changed by one count for 250 ms     | pump off, vent open, stage stops    | the reading changes again         |
-//! | `HEARTBEAT_LOST`   | no request for the heartbeat timeout (armed by the first request) | pump off, stage stops     | always (the clearing request is a heartbeat) |
+//! | `HEARTBEAT_LOST`   | no request for the heartbeat timeout while the pump runs or the stage moves | pump off, stage stops | always (the clearing request is a heartbeat) |
 //! | `LOAD_CELL_TIMEOUT`| no HX711 conversion for 800 ms (armed by the first one) | pump off, stage stops               | conversions arrive again          |
 //! | `WATCHDOG_RESET`   | reported by the board layer at boot                     | (the reset already stopped all)     | always                            |
+//!
+//! The heartbeat guards actuation only: a host that goes quiet while nothing runs (e.g. a
+//! command-line tool that sent one request and exited) leaves nothing to stop, so it
+//! latches no fault. Anything that starts the pump or the stage is itself a request, so the
+//! timer is always running when it matters.
 //!
 //! The manometer faults also open the vent: without a pressure reading the only safe state
 //! of the shell is unpressurised. `STAGE_LIMIT` is never raised: soft limits are enforced
@@ -71,6 +76,8 @@ pub struct SafetyInputs {
     pub pressure_kpa: f32,
     /// Time since the last HX711 conversion (`None` before the first).
     pub load_silent_us: Option<u64>,
+    /// The pump runs (regulating or manual) or the stage moves.
+    pub actuating: bool,
 }
 
 /// The latched-fault supervisor.
@@ -105,7 +112,7 @@ impl Supervisor {
         self.latched
     }
 
-    /// A request arrived (resets and arms the heartbeat timer).
+    /// A request arrived (restarts the heartbeat timer).
     pub fn note_request(&mut self, now_us: u64) {
         self.last_request_us = Some(now_us);
     }
@@ -155,6 +162,7 @@ impl Supervisor {
             causes |= FaultFlags::MANOMETER_STUCK;
         }
         if let Some(last) = self.last_request_us
+            && inputs.actuating
             && now_us.saturating_sub(last) >= l.heartbeat_timeout_us
         {
             causes |= FaultFlags::HEARTBEAT_LOST;

@@ -224,11 +224,23 @@ fn heartbeat_timeout_stops_pump_and_stage() {
 }
 
 #[test]
-fn heartbeat_is_not_armed_before_the_first_request() {
+fn a_quiet_host_trips_nothing_while_nothing_runs() {
     let mut bench = Bench::new();
     bench.auto_heartbeat = false;
     bench.run_quiet_ms(5000);
     assert!(bench.ctl.faults().is_empty());
+    // A command-line tool asks for the status and exits.
+    bench.ack(Request::GetStatus);
+    bench.run_quiet_ms(5000);
+    assert!(bench.ctl.faults().is_empty());
+    // It starts the pump manually and exits: the heartbeat now guards the pump.
+    bench.ack(Request::PumpManual { duty_per_10k: 500 });
+    bench.run_quiet_ms(990);
+    assert!(bench.ctl.faults().is_empty());
+    assert_eq!(bench.last.pump_duty_per_10k, 500);
+    bench.run_quiet_ms(20);
+    assert!(bench.ctl.faults().contains(FaultFlags::HEARTBEAT_LOST));
+    assert_eq!(bench.last.pump_duty_per_10k, 0);
 }
 
 #[test]
