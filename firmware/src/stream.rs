@@ -6,8 +6,9 @@
 //!   tick; ticks that were missed are skipped, not replayed. The controller must be ticked
 //!   at least as fast as the stream rate (it is ticked at 2 kHz).
 //! - Each sample's ADC channels are the mean of the ticks since the previous sample (see
-//!   [`ReadingAverager`]); the load is the latest conversion with `LOAD_FRESH` set when a
-//!   new one arrived since the previous sample.
+//!   [`ReadingAverager`]); the load is the latest conversion (minus the tare) with
+//!   `LOAD_FRESH` set when a new one arrived since the previous sample, and `None` before
+//!   the first conversion even when the channel is selected (no load cell fitted).
 //! - A block is closed when it holds [`MAX_SAMPLES_PER_BLOCK`] samples or its first sample
 //!   is [`MAX_BLOCK_LATENCY_US`] old (so slow streams still arrive promptly), and on
 //!   `StopStream`. `block_seq` starts at 0 with each `StartStream` and increments for every
