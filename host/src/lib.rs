@@ -1,2 +1,6 @@
 //! The host side of the video-tactile indentation sensor: everything behind the `tactile`
 //! command lives here, `main.rs` only parses arguments and reports errors.
+
+pub mod camera;
+pub mod usb;
+pub mod vision;

@@ -1,5 +1,7 @@
 //! `tactile`: the command-line front end. The real work lives in the `host` library.
 
+mod cli;
+
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
@@ -12,9 +14,20 @@ struct Cli {
 }
 
 #[derive(Debug, Subcommand)]
-enum Command {}
+enum Command {
+    /// Contact radius (px), centre, ellipse and quality of camera frames.
+    Radius(cli::radius::RadiusArgs),
+    /// List serial ports, tactile controllers and RP2040 boot ROMs.
+    Devices(cli::devices::DevicesArgs),
+    /// Convert firmware ELF to UF2, or flash it over PICOBOOT.
+    Flash(cli::flash::FlashArgs),
+}
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    match cli.command {}
+    match cli.command {
+        Command::Radius(args) => cli::radius::run(args),
+        Command::Devices(args) => cli::devices::run(args),
+        Command::Flash(args) => cli::flash::run(args),
+    }
 }

@@ -1,0 +1,203 @@
+//! One camera frame as delivered by a [`FrameSource`](super::FrameSource), and its luma plane.
+
+use zune_jpeg::JpegDecoder;
+use zune_jpeg::zune_core::bytestream::ZCursor;
+use zune_jpeg::zune_core::colorspace::ColorSpace;
+use zune_jpeg::zune_core::options::DecoderOptions;
+
+/// Pixel layout of [`Frame::data`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+pub enum PixelFormat {
+    /// 8-bit grey, one byte per pixel, rows packed.
+    Gray8,
+    /// YUV 4:2:2 packed as Y0 U Y1 V, two bytes per pixel, rows packed.
+    Yuyv,
+    /// One complete JPEG image (baseline), as UVC cameras stream it.
+    Mjpeg,
+}
+
+/// Errors turning a frame's bytes into a luma plane.
+#[derive(Debug, thiserror::Error)]
+pub enum FrameError {
+    #[error("{format:?} frame of {width}x{height} needs {expected} bytes, got {actual}")]
+    WrongSize {
+        format: PixelFormat,
+        width: u32,
+        height: u32,
+        expected: usize,
+        actual: usize,
+    },
+    #[error("MJPEG frame {sequence}: JPEG decode failed: {message}")]
+    Jpeg { sequence: u64, message: String },
+    #[error("MJPEG frame {sequence}: JPEG is {actual_w}x{actual_h}, stream says {width}x{height}")]
+    JpegSize {
+        sequence: u64,
+        width: u32,
+        height: u32,
+        actual_w: u32,
+        actual_h: u32,
+    },
+    #[error("image of {width}x{height} needs {expected} grey bytes, got {actual}")]
+    GraySize {
+        width: usize,
+        height: usize,
+        expected: usize,
+        actual: usize,
+    },
+}
+
+/// A frame from a camera or a recording. `width`/`height` are those the source negotiated;
+/// for MJPEG they are checked against the JPEG header when decoding. A width or height of 0
+/// on an MJPEG frame means "take the size from the JPEG" (recordings without a header).
+#[derive(Debug, Clone)]
+pub struct Frame {
+    pub format: PixelFormat,
+    pub width: u32,
+    pub height: u32,
+    /// Monotonic frame counter of the source; gaps mean dropped frames.
+    pub sequence: u64,
+    /// Capture time on the host clock, microseconds (see [`super::host_clock`]).
+    pub host_time_us: u64,
+    pub data: Vec<u8>,
+}
+
+/// An 8-bit grey image, rows packed (`pixels[y * width + x]`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct GrayImage {
+    width: usize,
+    height: usize,
+    pixels: Vec<u8>,
+}
+
+impl GrayImage {
+    /// Wraps `pixels`; the length must be exactly `width * height`.
+    pub fn new(width: usize, height: usize, pixels: Vec<u8>) -> Result<Self, FrameError> {
+        let expected = width.saturating_mul(height);
+        if pixels.len() != expected {
+            return Err(FrameError::GraySize {
+                width,
+                height,
+                expected,
+                actual: pixels.len(),
+            });
+        }
+        Ok(Self {
+            width,
+            height,
+            pixels,
+        })
+    }
+
+    /// Builds an image from `f(x, y)`, called in row-major order.
+    pub fn from_fn(width: usize, height: usize, mut f: impl FnMut(usize, usize) -> u8) -> Self {
+        let mut pixels = Vec::with_capacity(width * height);
+        for y in 0..height {
+            for x in 0..width {
+                pixels.push(f(x, y));
+            }
+        }
+        Self {
+            width,
+            height,
+            pixels,
+        }
+    }
+
+    pub fn width(&self) -> usize {
+        self.width
+    }
+
+    pub fn height(&self) -> usize {
+        self.height
+    }
+
+    pub fn pixels(&self) -> &[u8] {
+        &self.pixels
+    }
+
+    pub fn into_pixels(self) -> Vec<u8> {
+        self.pixels
+    }
+
+    /// Pixel at column `x`, row `y`; `None` outside the image.
+    pub fn get(&self, x: usize, y: usize) -> Option<u8> {
+        if x < self.width && y < self.height {
+            self.pixels.get(y * self.width + x).copied()
+        } else {
+            None
+        }
+    }
+}
+
+impl Frame {
+    /// A GRAY8 frame from a grey image.
+    pub fn from_gray(image: GrayImage, sequence: u64, host_time_us: u64) -> Self {
+        Self {
+            format: PixelFormat::Gray8,
+            width: u32::try_from(image.width).unwrap_or(u32::MAX),
+            height: u32::try_from(image.height).unwrap_or(u32::MAX),
+            sequence,
+            host_time_us,
+            data: image.into_pixels(),
+        }
+    }
+
+    /// The luma (Y / grey) plane: GRAY8 is copied, YUYV takes every other byte, MJPEG is
+    /// decoded to luma only (zune-jpeg skips the chroma colour conversion).
+    pub fn luma(&self) -> Result<GrayImage, FrameError> {
+        let (w, h) = (self.width as usize, self.height as usize);
+        match self.format {
+            PixelFormat::Gray8 => {
+                self.check_len(w * h)?;
+                GrayImage::new(w, h, self.data.clone())
+            }
+            PixelFormat::Yuyv => {
+                self.check_len(w * h * 2)?;
+                let y = self.data.iter().step_by(2).copied().collect();
+                GrayImage::new(w, h, y)
+            }
+            PixelFormat::Mjpeg => self.decode_jpeg_luma(),
+        }
+    }
+
+    fn check_len(&self, expected: usize) -> Result<(), FrameError> {
+        if self.data.len() == expected {
+            Ok(())
+        } else {
+            Err(FrameError::WrongSize {
+                format: self.format,
+                width: self.width,
+                height: self.height,
+                expected,
+                actual: self.data.len(),
+            })
+        }
+    }
+
+    fn decode_jpeg_luma(&self) -> Result<GrayImage, FrameError> {
+        let jpeg_err = |message: String| FrameError::Jpeg {
+            sequence: self.sequence,
+            message,
+        };
+        let options = DecoderOptions::default().jpeg_set_out_colorspace(ColorSpace::Luma);
+        let mut decoder = JpegDecoder::new_with_options(ZCursor::new(&self.data[..]), options);
+        decoder
+            .decode_headers()
+            .map_err(|e| jpeg_err(e.to_string()))?;
+        let info = decoder
+            .info()
+            .ok_or_else(|| jpeg_err("no image header".to_string()))?;
+        let (jw, jh) = (u32::from(info.width), u32::from(info.height));
+        if self.width != 0 && self.height != 0 && (jw != self.width || jh != self.height) {
+            return Err(FrameError::JpegSize {
+                sequence: self.sequence,
+                width: self.width,
+                height: self.height,
+                actual_w: jw,
+                actual_h: jh,
+            });
+        }
+        let pixels = decoder.decode().map_err(|e| jpeg_err(e.to_string()))?;
+        GrayImage::new(jw as usize, jh as usize, pixels)
+    }
+}

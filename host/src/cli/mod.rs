@@ -1,0 +1,4 @@
+//! Subcommand implementations; `main.rs` only dispatches.
+pub mod devices;
+pub mod flash;
+pub mod radius;

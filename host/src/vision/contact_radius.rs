@@ -1,0 +1,703 @@
+//! Contact radius from a camera frame and a no-contact reference frame.
+//!
+//! Method (contrast-relative, no fixed grey-level threshold):
+//! 1. Normalised difference `n = (I - R) / R` per pixel: the LED's vignetting and
+//!    illumination gradient multiply both frames, so `n` is flat where contact changes the
+//!    reflectance by a constant factor. Saturated pixels and the apex mirror (much brighter
+//!    than the reference's median) are masked.
+//! 2. Detection on 4x4 blocks: robust median/MAD of `n`, candidates beyond 5 sigma, polarity
+//!    by majority, re-threshold at half the candidates' median level, largest 4-connected
+//!    component with holes (the mirror) filled. Nothing found = "no contact".
+//!    This gives a coarse centre and radius (about +-2 px).
+//! 3. Area moment in a band: with the contact level `in(x, y)` and the background level
+//!    `out(x, y)` fitted as planes (robust least squares) in rings just inside and outside a
+//!    band of +-w px around the current edge model, each band pixel contributes the fraction
+//!    `f = (n - out) / (in - out)`; the contact area is `A = N_inner + sum_band f`. A blurred
+//!    disc keeps the area `pi r^2` of the sharp one (convolution preserves the integral), so
+//!    `r = sqrt(A / pi)` has no blur or contrast bias, and pixel noise averages over the band.
+//! 4. Shape: the same sum per angular sector gives a polar radius per sector
+//!    (`A_s = r_s^2 dtheta / 2`); an algebraic ellipse fit of those edge points gives the
+//!    centre, axes and angle. The band follows the fitted ellipse in a second pass.
+//!    Eccentricity = sin(tilt) for a circular contact seen obliquely.
+
+use super::ellipse_fit::{Ellipse, fit_ellipse};
+use super::linear_solve::solve;
+use crate::camera::GrayImage;
+
+/// Tunable parameters; the defaults are what the accuracy tests use.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ContactRadiusConfig {
+    /// Block-level detection threshold, robust standard deviations.
+    pub detect_sigma: f64,
+    /// Smallest contact radius reported; smaller blobs are "no contact".
+    pub min_radius_px: f64,
+    /// Half width of the band around the edge summed for the area (covers the blur: the
+    /// edge profile of a Gaussian blur of sigma 2.5 px is within 7e-4 of a step at 9 px).
+    pub band_half_width_px: f64,
+    /// Width of the rings inside and outside the band where the levels are fitted.
+    pub level_ring_px: f64,
+    /// Angular sectors for the edge points of the ellipse fit.
+    pub sectors: usize,
+    /// Pixels at or above this grey level (in either frame) are ignored.
+    pub saturation_level: u8,
+    /// Reference pixels brighter than this multiple of the reference's median are treated
+    /// as the apex mirror and ignored.
+    pub mirror_ratio: f64,
+    /// Eccentricity above which the contact is flagged as tilted (0.35 = 20 degrees).
+    pub tilt_eccentricity: f64,
+}
+
+impl Default for ContactRadiusConfig {
+    fn default() -> Self {
+        Self {
+            detect_sigma: 5.0,
+            min_radius_px: 10.0,
+            band_half_width_px: 9.0,
+            level_ring_px: 5.0,
+            sectors: 32,
+            saturation_level: 250,
+            mirror_ratio: 1.6,
+            tilt_eccentricity: 0.35,
+        }
+    }
+}
+
+/// The contact disc found in a frame.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct ContactDisc {
+    /// Radius of the circle with the contact's area, px.
+    pub radius_px: f64,
+    /// Standard error of `radius_px` predicted from the measured pixel noise, px.
+    pub radius_sigma_px: f64,
+    pub center_px: [f64; 2],
+    /// Fitted shape, scaled to the measured area.
+    pub ellipse: Ellipse,
+    pub eccentricity: f64,
+    /// Tilt implied by the eccentricity, `asin(e)`, degrees.
+    pub tilt_deg: f64,
+    pub tilted: bool,
+    /// Mean relative contrast `(I - R) / R` inside minus outside the edge (signed).
+    pub contrast: f64,
+    /// |contrast| / per-pixel noise of the normalised difference.
+    pub edge_snr: f64,
+    /// RMS of the sector radii about the fitted ellipse, px.
+    pub fit_rms_px: f64,
+    /// True when the disc's band runs off the image (radius from the visible sectors).
+    pub clipped: bool,
+}
+
+/// Result for one frame. `quality` is 0 without contact, else in (0, 1]:
+/// `1 / (1 + (radius_sigma_px / 0.1)^2)` (0.5 when the predicted error equals the 0.1 px
+/// target) times `1 / (1 + max(0, chi - 2)^2)` where chi is the sector radii's RMS about
+/// the ellipse over their predicted noise (an irregular, non-elliptical edge lowers it),
+/// times the visible fraction of the band.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct ContactRadius {
+    pub contact: bool,
+    pub quality: f64,
+    pub disc: Option<ContactDisc>,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum VisionError {
+    #[error("frame is {fw}x{fh} but the reference is {rw}x{rh}")]
+    SizeMismatch {
+        fw: usize,
+        fh: usize,
+        rw: usize,
+        rh: usize,
+    },
+    #[error("frame of {w}x{h} is too small (need at least 32x32)")]
+    TooSmall { w: usize, h: usize },
+}
+
+const BLOCK: usize = 4;
+
+/// Per-block sums and maxima of an image (4x4 blocks; the right/bottom remainder is left
+/// out of detection only).
+#[derive(Debug, Clone)]
+struct Blocks {
+    bw: usize,
+    bh: usize,
+    sum: Vec<u32>,
+    max: Vec<u8>,
+}
+
+impl Blocks {
+    fn of(img: &GrayImage) -> Self {
+        let (w, bw, bh) = (img.width(), img.width() / BLOCK, img.height() / BLOCK);
+        let mut sum = vec![0u32; bw * bh];
+        let mut max = vec![0u8; bw * bh];
+        let px = img.pixels();
+        for by in 0..bh {
+            let (s_row, m_row) = (
+                &mut sum[by * bw..(by + 1) * bw],
+                &mut max[by * bw..(by + 1) * bw],
+            );
+            for r in 0..BLOCK {
+                let row = &px[(by * BLOCK + r) * w..][..bw * BLOCK];
+                for ((chunk, s), m) in row
+                    .chunks_exact(BLOCK)
+                    .zip(s_row.iter_mut())
+                    .zip(m_row.iter_mut())
+                {
+                    *s += chunk.iter().map(|&v| u32::from(v)).sum::<u32>();
+                    *m = chunk.iter().fold(*m, |a, &v| a.max(v));
+                }
+            }
+        }
+        Self { bw, bh, sum, max }
+    }
+}
+
+/// A no-contact reference prepared once for many frames.
+#[derive(Debug, Clone)]
+pub struct ContactRadiusEstimator {
+    reference: GrayImage,
+    blocks: Blocks,
+    /// Pixels of the reference at or above this level are the mirror.
+    mirror_level: f64,
+    config: ContactRadiusConfig,
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    let mid = v.len() / 2;
+    let (_, m, _) = v.select_nth_unstable_by(mid, f64::total_cmp);
+    *m
+}
+
+/// Robust standard deviation, 1.4826 * MAD (consistent for Gaussian noise).
+fn robust_sigma(v: &mut [f64], center: f64) -> f64 {
+    for x in v.iter_mut() {
+        *x = (*x - center).abs();
+    }
+    1.4826 * median(v)
+}
+
+/// Fast atan2 (max error about 1e-5 rad; only used to bin pixels into sectors).
+fn fast_atan2(y: f64, x: f64) -> f64 {
+    let (ax, ay) = (x.abs(), y.abs());
+    let (mn, mx) = if ax < ay { (ax, ay) } else { (ay, ax) };
+    if mx == 0.0 {
+        return 0.0;
+    }
+    let a = mn / mx;
+    let s = a * a;
+    let mut r = ((-0.046_496_474_9 * s + 0.159_314_22) * s - 0.327_622_764) * s * a + a;
+    if ay > ax {
+        r = std::f64::consts::FRAC_PI_2 - r;
+    }
+    if x < 0.0 {
+        r = std::f64::consts::PI - r;
+    }
+    if y < 0.0 { -r } else { r }
+}
+
+/// A plane `a0 + a1 x + a2 y` fitted robustly (least squares, then again without
+/// residuals beyond 4 robust sigma); also returns that sigma.
+fn fit_plane(samples: &[[f64; 3]]) -> Option<([f64; 3], f64)> {
+    if samples.len() < 12 {
+        return None;
+    }
+    let lsq = |keep: &dyn Fn(&[f64; 3]) -> bool| -> Option<[f64; 3]> {
+        let mut ata = [[0.0; 3]; 3];
+        let mut atb = [0.0; 3];
+        for s in samples.iter().filter(|s| keep(s)) {
+            let row = [1.0, s[0], s[1]];
+            for i in 0..3 {
+                for j in 0..3 {
+                    ata[i][j] += row[i] * row[j];
+                }
+                atb[i] += row[i] * s[2];
+            }
+        }
+        solve(ata, atb)
+    };
+    let p = lsq(&|_| true)?;
+    let eval = |p: &[f64; 3], s: &[f64; 3]| s[2] - (p[0] + p[1] * s[0] + p[2] * s[1]);
+    let mut res: Vec<f64> = samples.iter().map(|s| eval(&p, s)).collect();
+    let sigma = robust_sigma(&mut res, 0.0).max(1e-9);
+    let p2 = lsq(&|s| eval(&p, s).abs() <= 4.0 * sigma).unwrap_or(p);
+    Some((p2, sigma))
+}
+
+/// Coarse detection result.
+#[derive(Debug, Clone, Copy)]
+struct Coarse {
+    center: [f64; 2],
+    radius: f64,
+}
+
+/// Sums from one band pass.
+#[derive(Debug, Clone)]
+struct BandPass {
+    radius: f64,
+    radius_sigma: f64,
+    contrast: f64,
+    edge_snr: f64,
+    /// Sector edge points (only sectors whose band is entirely inside the image).
+    points: Vec<[f64; 2]>,
+    point_sigma: f64,
+    visible_fraction: f64,
+}
+
+impl ContactRadiusEstimator {
+    pub fn new(reference: GrayImage, config: ContactRadiusConfig) -> Result<Self, VisionError> {
+        let (w, h) = (reference.width(), reference.height());
+        if w < 32 || h < 32 {
+            return Err(VisionError::TooSmall { w, h });
+        }
+        let blocks = Blocks::of(&reference);
+        let mut means: Vec<f64> = blocks
+            .sum
+            .iter()
+            .zip(&blocks.max)
+            .filter(|(_, m)| **m < config.saturation_level)
+            .map(|(s, _)| f64::from(*s) / (BLOCK * BLOCK) as f64)
+            .collect();
+        let mirror_level = config.mirror_ratio * median(&mut means).max(1.0);
+        Ok(Self {
+            reference,
+            blocks,
+            mirror_level,
+            config,
+        })
+    }
+
+    pub fn reference(&self) -> &GrayImage {
+        &self.reference
+    }
+
+    pub fn config(&self) -> &ContactRadiusConfig {
+        &self.config
+    }
+
+    /// Measures the contact in `frame`.
+    pub fn measure(&self, frame: &GrayImage) -> Result<ContactRadius, VisionError> {
+        let r = &self.reference;
+        if frame.width() != r.width() || frame.height() != r.height() {
+            return Err(VisionError::SizeMismatch {
+                fw: frame.width(),
+                fh: frame.height(),
+                rw: r.width(),
+                rh: r.height(),
+            });
+        }
+        let none = ContactRadius {
+            contact: false,
+            quality: 0.0,
+            disc: None,
+        };
+        let Some(coarse) = self.detect(frame) else {
+            return Ok(none);
+        };
+        let mut model = Ellipse::circle(coarse.center, coarse.radius);
+        let mut last: Option<(BandPass, Ellipse)> = None;
+        for pass in 0..3 {
+            let Some(band) = self.band_pass(frame, &model) else {
+                break;
+            };
+            let fitted = if band.points.len() >= 8 {
+                fit_ellipse(&band.points)
+            } else {
+                None
+            };
+            let shape = fitted.unwrap_or(model);
+            let next = shape.scaled_to_radius(band.radius);
+            let shift = ((next.center_px[0] - model.center_px[0]).powi(2)
+                + (next.center_px[1] - model.center_px[1]).powi(2))
+            .sqrt();
+            model = next;
+            last = Some((band, next));
+            if pass >= 1 && shift < 1.0 {
+                break;
+            }
+        }
+        let Some((band, ellipse)) = last else {
+            return Ok(none);
+        };
+        if band.radius < self.config.min_radius_px || !band.radius.is_finite() {
+            return Ok(none);
+        }
+        let fit_rms = rms_about(&band.points, &ellipse);
+        let chi = fit_rms / band.point_sigma.max(1e-9);
+        let quality =
+            1.0 / (1.0 + (band.radius_sigma / 0.1).powi(2)) / (1.0 + (chi - 2.0).max(0.0).powi(2))
+                * band.visible_fraction;
+        let e = ellipse.eccentricity();
+        Ok(ContactRadius {
+            contact: true,
+            quality,
+            disc: Some(ContactDisc {
+                radius_px: band.radius,
+                radius_sigma_px: band.radius_sigma,
+                center_px: ellipse.center_px,
+                ellipse,
+                eccentricity: e,
+                tilt_deg: e.asin().to_degrees(),
+                tilted: e > self.config.tilt_eccentricity,
+                contrast: band.contrast,
+                edge_snr: band.edge_snr,
+                fit_rms_px: fit_rms,
+                clipped: band.visible_fraction < 1.0,
+            }),
+        })
+    }
+
+    /// Step 2: block-level detection. `None` = no contact.
+    fn detect(&self, frame: &GrayImage) -> Option<Coarse> {
+        let cfg = &self.config;
+        let fb = Blocks::of(frame);
+        let rb = &self.blocks;
+        let (bw, bh) = (rb.bw, rb.bh);
+        let area = (BLOCK * BLOCK) as f64;
+        let sat = cfg.saturation_level;
+        let mut n = vec![f64::NAN; bw * bh];
+        let mut valid_vals = Vec::with_capacity(bw * bh);
+        for (i, ni) in n.iter_mut().enumerate() {
+            let (fs, rs) = (f64::from(fb.sum[i]), f64::from(rb.sum[i]));
+            if fb.max[i] < sat && rb.max[i] < sat && rs / area < self.mirror_level {
+                let v = (fs - rs) / rs.max(4.0 * area);
+                *ni = v;
+                valid_vals.push(v);
+            }
+        }
+        if valid_vals.len() < 16 {
+            return None;
+        }
+        let med = median(&mut valid_vals);
+        let sigma = robust_sigma(&mut valid_vals, med).max(1e-6);
+        let thr = cfg.detect_sigma * sigma;
+        let (mut pos, mut neg) = (Vec::new(), Vec::new());
+        for v in n.iter().filter(|v| v.is_finite()) {
+            let d = v - med;
+            if d > thr {
+                pos.push(d);
+            } else if d < -thr {
+                neg.push(-d);
+            }
+        }
+        let (sign, mut cands) = if pos.len() >= neg.len() {
+            (1.0, pos)
+        } else {
+            (-1.0, neg)
+        };
+        let min_blocks = (std::f64::consts::PI * cfg.min_radius_px.powi(2) / area).max(4.0);
+        if (cands.len() as f64) < min_blocks {
+            return None;
+        }
+        let level = median(&mut cands);
+        let mask: Vec<bool> = n
+            .iter()
+            .map(|v| v.is_finite() && sign * (v - med) > 0.5 * level)
+            .collect();
+        let component = largest_component(&mask, bw, bh);
+        if (component.len() as f64) < min_blocks {
+            return None;
+        }
+        let mut in_comp = vec![false; bw * bh];
+        for &i in &component {
+            in_comp[i] = true;
+        }
+        // Fill holes (the mirror, saturated blocks): everything not reachable from the
+        // border without crossing the component.
+        let outside = reachable_from_border(&in_comp, bw, bh);
+        let (mut cnt, mut sx, mut sy) = (0.0, 0.0, 0.0);
+        for (i, &out) in outside.iter().enumerate() {
+            if !out {
+                cnt += 1.0;
+                sx += (i % bw) as f64;
+                sy += (i / bw) as f64;
+            }
+        }
+        let b = BLOCK as f64;
+        let center = [
+            sx / cnt * b + (b - 1.0) / 2.0,
+            sy / cnt * b + (b - 1.0) / 2.0,
+        ];
+        let radius = (cnt * area / std::f64::consts::PI).sqrt();
+        Some(Coarse { center, radius })
+    }
+
+    /// Step 3 and 4 for one edge model.
+    fn band_pass(&self, frame: &GrayImage, model: &Ellipse) -> Option<BandPass> {
+        let cfg = &self.config;
+        let (w_img, h_img) = (frame.width(), frame.height());
+        let r_eq = model.equivalent_radius_px();
+        // Shrink band and rings for small discs so the inner ring stays inside.
+        let shrink = (r_eq / (cfg.band_half_width_px + cfg.level_ring_px + 3.0)).min(1.0);
+        let w = cfg.band_half_width_px * shrink;
+        let ring = cfg.level_ring_px * shrink;
+        let (cx, cy) = (model.center_px[0], model.center_px[1]);
+        let r_lo = (model.semi_minor_px - w - ring).max(0.0);
+        let r_hi = model.semi_major_px + w + ring;
+        let sectors = cfg.sectors.max(8);
+        let sector_of = |dx: f64, dy: f64| -> usize {
+            let t = (fast_atan2(dy, dx) + std::f64::consts::PI) / std::f64::consts::TAU;
+            ((t * sectors as f64) as usize).min(sectors - 1)
+        };
+        let (sin_a, cos_a) = model.angle_rad.sin_cos();
+        let (ia, ib) = (1.0 / model.semi_major_px, 1.0 / model.semi_minor_px);
+        let is_circle = (model.semi_major_px - model.semi_minor_px).abs() < 1e-9;
+        // Signed distance to the model edge (negative inside); exact for a circle, along
+        // the ray from the centre for an ellipse.
+        let signed = |dx: f64, dy: f64| -> f64 {
+            let q = (dx * dx + dy * dy).sqrt();
+            if is_circle {
+                q - model.semi_major_px
+            } else {
+                let u = (dx * cos_a + dy * sin_a) * ia;
+                let v = (-dx * sin_a + dy * cos_a) * ib;
+                let rho = (u * u + v * v).sqrt();
+                if rho > 0.0 {
+                    q - q / rho
+                } else {
+                    -model.semi_minor_px
+                }
+            }
+        };
+        let fpx = frame.pixels();
+        let rpx = self.reference.pixels();
+        let sat = f64::from(cfg.saturation_level);
+        let mut n_inner = 0.0f64;
+        let mut inner_ring: Vec<[f64; 3]> = Vec::new();
+        let mut outer_ring: Vec<[f64; 3]> = Vec::new();
+        // band samples: dx, dy, n (NaN if masked), s, sector
+        let mut band: Vec<(f64, f64, f64, f64, usize)> = Vec::new();
+        let mut sector_clipped = vec![false; sectors];
+        let scale = 1.0 / r_hi.max(1.0);
+        let y0 = (cy - r_hi).floor() as i64;
+        let y1 = (cy + r_hi).ceil() as i64;
+        for yi in y0..=y1 {
+            let dy = yi as f64 - cy;
+            let span2 = r_hi * r_hi - dy * dy;
+            if span2 < 0.0 {
+                continue;
+            }
+            let span = span2.sqrt();
+            let (xa, xb) = ((cx - span).ceil() as i64, (cx + span).floor() as i64);
+            let hole = if dy.abs() < r_lo {
+                let s = (r_lo * r_lo - dy * dy).sqrt();
+                Some(((cx - s).ceil() as i64, (cx + s).floor() as i64))
+            } else {
+                None
+            };
+            let row_inside = yi >= 0 && (yi as usize) < h_img;
+            // Pixels inside the hole are all inner (f = 1): count them, no need to visit.
+            if let Some((ha, hb)) = hole {
+                let (ca, cb) = (ha.max(0), hb.min(w_img as i64 - 1));
+                if hb >= ha && row_inside && cb >= ca {
+                    n_inner += (cb - ca + 1) as f64;
+                }
+            }
+            for xi in xa..=xb {
+                if hole.is_some_and(|(ha, hb)| xi >= ha && xi <= hb) {
+                    continue;
+                }
+                let dx = xi as f64 - cx;
+                let s = signed(dx, dy);
+                if s > w + ring {
+                    continue;
+                }
+                let inside_img = row_inside && xi >= 0 && (xi as usize) < w_img;
+                if !inside_img {
+                    if s >= -w {
+                        sector_clipped[sector_of(dx, dy)] = true;
+                    }
+                    continue;
+                }
+                if s < -w - ring {
+                    n_inner += 1.0;
+                    continue;
+                }
+                let idx = yi as usize * w_img + xi as usize;
+                let (iv, rv) = (f64::from(fpx[idx]), f64::from(rpx[idx]));
+                let masked = iv >= sat || rv >= sat || rv >= self.mirror_level;
+                let nv = if masked {
+                    f64::NAN
+                } else {
+                    (iv - rv) / rv.max(4.0)
+                };
+                if s < -w {
+                    n_inner += 1.0;
+                    if !masked {
+                        inner_ring.push([dx * scale, dy * scale, nv]);
+                    }
+                } else if s <= w {
+                    band.push((dx, dy, nv, s, sector_of(dx, dy)));
+                } else if !masked {
+                    outer_ring.push([dx * scale, dy * scale, nv]);
+                }
+            }
+        }
+        let (p_in, sig_in) = fit_plane(&inner_ring)?;
+        let (p_out, sig_out) = fit_plane(&outer_ring)?;
+        let level = |p: &[f64; 3], dx: f64, dy: f64| p[0] + p[1] * dx * scale + p[2] * dy * scale;
+        let contrast = p_in[0] - p_out[0];
+        let noise = 0.5 * (sig_in + sig_out);
+        if contrast.abs() < 1e-9 {
+            return None;
+        }
+        let mut sector_sum = vec![0.0f64; sectors];
+        let mut sector_count = vec![0usize; sectors];
+        let mut band_sum = 0.0;
+        let mut band_var = 0.0;
+        for &(dx, dy, nv, s, sec) in &band {
+            let f = if nv.is_nan() {
+                if s < 0.0 { 1.0 } else { 0.0 }
+            } else {
+                let (li, lo) = (level(&p_in, dx, dy), level(&p_out, dx, dy));
+                let d = li - lo;
+                if d.abs() < 1e-9 {
+                    if s < 0.0 { 1.0 } else { 0.0 }
+                } else {
+                    band_var += (noise / d).powi(2);
+                    (nv - lo) / d
+                }
+            };
+            band_sum += f;
+            sector_sum[sec] += f;
+            sector_count[sec] += 1;
+        }
+        let dtheta = std::f64::consts::TAU / sectors as f64;
+        let visible: Vec<usize> = (0..sectors).filter(|&s| !sector_clipped[s]).collect();
+        let visible_fraction = visible.len() as f64 / sectors as f64;
+        // Per-sector polar area: analytic inner part + band sum.
+        let mut points = Vec::with_capacity(sectors);
+        let mut sector_areas = vec![0.0; sectors];
+        for s in 0..sectors {
+            let theta = -std::f64::consts::PI + (s as f64 + 0.5) * dtheta;
+            let (st, ct) = theta.sin_cos();
+            let r_inner = (model.polar_radius_px(ct, st) - w).max(0.0);
+            let a_s = 0.5 * dtheta * r_inner * r_inner + sector_sum[s];
+            sector_areas[s] = a_s;
+            if !sector_clipped[s] {
+                let r_s = (2.0 * a_s.max(0.0) / dtheta).sqrt();
+                points.push([cx + r_s * ct, cy + r_s * st]);
+            }
+        }
+        let area = if visible_fraction >= 1.0 {
+            n_inner + band_sum
+        } else if visible.is_empty() {
+            return None;
+        } else {
+            visible.iter().map(|&s| sector_areas[s]).sum::<f64>() / visible_fraction
+        };
+        if area <= 0.0 {
+            return None;
+        }
+        let radius = (area / std::f64::consts::PI).sqrt();
+        let radius_sigma = band_var.sqrt() / (std::f64::consts::TAU * radius);
+        let mean_count = band.len() as f64 / sectors as f64;
+        let point_sigma = (noise / contrast.abs()) * mean_count.sqrt() / (radius * dtheta);
+        Some(BandPass {
+            radius,
+            radius_sigma,
+            contrast,
+            edge_snr: contrast.abs() / noise.max(1e-12),
+            points,
+            point_sigma,
+            visible_fraction,
+        })
+    }
+}
+
+fn rms_about(points: &[[f64; 2]], e: &Ellipse) -> f64 {
+    if points.is_empty() {
+        return 0.0;
+    }
+    let ss: f64 = points
+        .iter()
+        .map(|p| {
+            let (dx, dy) = (p[0] - e.center_px[0], p[1] - e.center_px[1]);
+            ((dx * dx + dy * dy).sqrt() - e.polar_radius_px(dx, dy)).powi(2)
+        })
+        .sum();
+    (ss / points.len() as f64).sqrt()
+}
+
+fn largest_component(mask: &[bool], bw: usize, bh: usize) -> Vec<usize> {
+    let mut seen = vec![false; mask.len()];
+    let mut best = Vec::new();
+    let mut stack = Vec::new();
+    for start in 0..mask.len() {
+        if !mask[start] || seen[start] {
+            continue;
+        }
+        let mut comp = Vec::new();
+        seen[start] = true;
+        stack.push(start);
+        while let Some(i) = stack.pop() {
+            comp.push(i);
+            let (x, y) = (i % bw, i / bw);
+            let mut visit = |j: usize| {
+                if mask[j] && !seen[j] {
+                    seen[j] = true;
+                    stack.push(j);
+                }
+            };
+            if x > 0 {
+                visit(i - 1);
+            }
+            if x + 1 < bw {
+                visit(i + 1);
+            }
+            if y > 0 {
+                visit(i - bw);
+            }
+            if y + 1 < bh {
+                visit(i + bw);
+            }
+        }
+        if comp.len() > best.len() {
+            best = comp;
+        }
+    }
+    best
+}
+
+fn reachable_from_border(blocked: &[bool], bw: usize, bh: usize) -> Vec<bool> {
+    let mut seen = vec![false; blocked.len()];
+    let mut stack: Vec<usize> = Vec::new();
+    for i in 0..blocked.len() {
+        let (x, y) = (i % bw, i / bw);
+        if (x == 0 || y == 0 || x + 1 == bw || y + 1 == bh) && !blocked[i] {
+            seen[i] = true;
+            stack.push(i);
+        }
+    }
+    while let Some(i) = stack.pop() {
+        let (x, y) = (i % bw, i / bw);
+        let mut visit = |j: usize| {
+            if !blocked[j] && !seen[j] {
+                seen[j] = true;
+                stack.push(j);
+            }
+        };
+        if x > 0 {
+            visit(i - 1);
+        }
+        if x + 1 < bw {
+            visit(i + 1);
+        }
+        if y > 0 {
+            visit(i - bw);
+        }
+        if y + 1 < bh {
+            visit(i + bw);
+        }
+    }
+    seen
+}
+
+/// One-shot convenience: prepares `reference` and measures `frame`.
+pub fn contact_radius(
+    frame: &GrayImage,
+    reference: &GrayImage,
+    config: &ContactRadiusConfig,
+) -> Result<ContactRadius, VisionError> {
+    ContactRadiusEstimator::new(reference.clone(), config.clone())?.measure(frame)
+}
