@@ -1,96 +1,182 @@
 //! Frictionless node-to-segment contact with an augmented-Lagrangian penalty.
 //!
-//! Slave nodes are the shell's outer-surface nodes, the master surface is the sample's top
-//! surface, taken piecewise linear through all of its nodes (corner and mid-side). For a
-//! slave x_s and a master segment (x1, x2) the normal gap is
+//! Slave nodes are the sample's top-surface nodes (the softer body, whose surface becomes
+//! concave); the master surface is the shell's convex outer surface, smoothed to a C1 curve
+//! by a uniform Catmull–Rom spline through all its nodes (corner and mid-side), so that the
+//! normal is continuous and slaves sliding over element boundaries do not make Newton
+//! cycle (surface smoothing: Padmanabhan & Laursen 2001; Wriggers, "Computational Contact
+//! Mechanics", sec. 9.4). The spline is ordered so that its outward normal (the tangent
+//! rotated by +90 degrees) points out of the shell; at the axis it is closed by the mirror
+//! image of the first node. Each spline segment is `c(t) = sum_k w_k(t) P_k` with control
+//! points P_k linear in the nodal positions. For a slave x_s the closest point c(t*) is
+//! found by Newton's method on `(c(t) - x_s) . c'(t) = 0`, and the normal gap is
+//! `g = (x_s - c(t*)) . n(t*)` (positive when open).
 //!
-//! `g = (a x b) / |a|`,  `a = x2 - x1`, `b = x_s - x1`  (positive when open),
+//! At the closest point the first variation is exact and simple (Wriggers, sec. 4.3):
+//! `dg/dx_s = n`, `dg/dP_k = -w_k(t*) n`. Its second
+//! variation (curvature and projection terms) is obtained by central differences of that
+//! analytic gradient, then symmetrised; the unit test checks it.
 //!
-//! and the contact force on the slave, with tributary reference area `A` (2 pi R weighted),
-//! penalty `eps` (kPa/mm) and multiplier `lambda` (N-like force, held during a Newton
-//! solve and updated by Uzawa augmentation between solves) is
-//!
-//! `f_n = < lambda - eps A g >`,  potential `Pi = < lambda - eps A g >^2 / (2 eps A)`,
-//!
-//! so `dPi/dx = -f_n dg/dx` and `d2Pi/dx2 = eps A dg dg^T - f_n d2g/dx2` (exact Hessian of g;
-//! Wriggers, "Computational Contact Mechanics", ch. 4 and 9). The contact pressure
-//! reported is `f_n` over the current tributary area.
+//! The contact force on the slave with tributary reference area `A` (2 pi R weighted),
+//! penalty `eps` (kPa/mm) and multiplier `lambda` (mN, updated by Uzawa augmentation between
+//! solves) is `f_n = < lambda - eps A g >` with the potential
+//! `Pi = < lambda - eps A g >^2 / (2 eps A)`, so `dPi/dx = -f_n dg/dx` and
+//! `d2Pi/dx2 = eps A dg dg^T - f_n d2g/dx2`. The bracket is C1-smoothed over a tiny gap
+//! width ([`smooth_ramp`]) so that nodes entering or leaving contact do not make Newton cycle.
+//! The contact pressure reported is `f_n` over the current tributary area.
 
 use std::f64::consts::PI;
 
-/// Normal gap of a slave point on a linear master segment and its derivatives with respect
-/// to (x_s, x1, x2) = (r_s, z_s, r1, z1, r2, z2).
+
+/// Uniform Catmull–Rom basis on t in [0, 1] for control points (P0, P1, P2, P3), the
+/// segment running from P1 to P2, and its first and second derivatives.
+pub fn catmull_rom(t: f64) -> ([f64; 4], [f64; 4], [f64; 4]) {
+    let (t2, t3) = (t * t, t * t * t);
+    (
+        [
+            0.5 * (-t3 + 2.0 * t2 - t),
+            0.5 * (3.0 * t3 - 5.0 * t2 + 2.0),
+            0.5 * (-3.0 * t3 + 4.0 * t2 + t),
+            0.5 * (t3 - t2),
+        ],
+        [
+            0.5 * (-3.0 * t2 + 4.0 * t - 1.0),
+            0.5 * (9.0 * t2 - 10.0 * t),
+            0.5 * (-9.0 * t2 + 8.0 * t + 1.0),
+            0.5 * (3.0 * t2 - 2.0 * t),
+        ],
+        [
+            0.5 * (-6.0 * t + 4.0),
+            0.5 * (18.0 * t - 10.0),
+            0.5 * (-18.0 * t + 8.0),
+            0.5 * (6.0 * t - 2.0),
+        ],
+    )
+}
+
+/// Normal gap of a slave point on one spline segment with control points `p`.
 #[derive(Debug, Clone, Copy)]
 pub struct Gap {
     pub gap_mm: f64,
-    /// Local coordinate of the projection, 0 at x1, 1 at x2.
-    pub xi: f64,
-    pub gradient: [f64; 6],
-    pub hessian: [[f64; 6]; 6],
+    /// Segment parameter of the closest point (0 .. 1 inside).
+    pub t: f64,
+    /// Unit outward normal at the closest point.
+    pub normal: [f64; 2],
+    /// Basis weights of the control points at the closest point.
+    pub weights: [f64; 4],
 }
 
-/// Evaluate the gap of `xs` on the segment `x1 -> x2` (the outward normal of the master
-/// is the segment tangent rotated by +90 degrees).
-pub fn gap(xs: [f64; 2], x1: [f64; 2], x2: [f64; 2]) -> Gap {
-    let a = [x2[0] - x1[0], x2[1] - x1[1]];
-    let b = [xs[0] - x1[0], xs[1] - x1[1]];
-    let l2 = a[0] * a[0] + a[1] * a[1];
-    let l = l2.sqrt();
-    let l3 = l2 * l;
-    let l5 = l3 * l2;
-    let c = a[0] * b[1] - a[1] * b[0];
-    let c_a = [b[1], -b[0]];
-    let c_b = [-a[1], a[0]];
-    let c_ab = [[0.0, 1.0], [-1.0, 0.0]];
-    let g_a = [c_a[0] / l - c * a[0] / l3, c_a[1] / l - c * a[1] / l3];
-    let g_b = [c_b[0] / l, c_b[1] / l];
-    // Hessian in (a, b) variables
-    let mut h_ab = [[0.0; 4]; 4];
-    for i in 0..2 {
-        for j in 0..2 {
-            let delta = if i == j { 1.0 } else { 0.0 };
-            h_ab[i][j] = -(c_a[i] * a[j] + a[i] * c_a[j]) / l3 - c * delta / l3
-                + 3.0 * c * a[i] * a[j] / l5;
-            let mixed = c_ab[i][j] / l - a[i] * c_b[j] / l3;
-            h_ab[i][2 + j] = mixed;
-            h_ab[2 + j][i] = mixed;
-        }
+/// Closest-point projection of `xs` on the segment with control points `p`.
+pub fn gap(xs: [f64; 2], p: &[[f64; 2]; 4]) -> Option<Gap> {
+    let chord = [p[2][0] - p[1][0], p[2][1] - p[1][1]];
+    let l2 = chord[0] * chord[0] + chord[1] * chord[1];
+    if l2 <= 0.0 {
+        return None;
     }
-    // chain rule: a = x2 - x1, b = xs - x1 ; lmap[k][m] = d(a,b)_k / d x_m
-    let mut lmap = [[0.0; 6]; 4];
-    for i in 0..2 {
-        lmap[i][2 + i] = -1.0;
-        lmap[i][4 + i] = 1.0;
-        lmap[2 + i][i] = 1.0;
-        lmap[2 + i][2 + i] = -1.0;
-    }
-    let g_ab = [g_a[0], g_a[1], g_b[0], g_b[1]];
-    let mut gradient = [0.0; 6];
-    let mut hessian = [[0.0; 6]; 6];
-    for m in 0..6 {
+    let mut t = ((xs[0] - p[1][0]) * chord[0] + (xs[1] - p[1][1]) * chord[1]) / l2;
+    let eval = |t: f64| {
+        let (w, dw, d2w) = catmull_rom(t);
+        let mut c = [0.0; 2];
+        let mut dc = [0.0; 2];
+        let mut d2c = [0.0; 2];
         for k in 0..4 {
-            gradient[m] += lmap[k][m] * g_ab[k];
-        }
-    }
-    for m in 0..6 {
-        for n in 0..6 {
-            let mut s = 0.0;
-            for k in 0..4 {
-                if lmap[k][m] == 0.0 {
-                    continue;
-                }
-                for q in 0..4 {
-                    s += lmap[k][m] * h_ab[k][q] * lmap[q][n];
-                }
+            for i in 0..2 {
+                c[i] += w[k] * p[k][i];
+                dc[i] += dw[k] * p[k][i];
+                d2c[i] += d2w[k] * p[k][i];
             }
-            hessian[m][n] = s;
+        }
+        (w, c, dc, d2c)
+    };
+    for _ in 0..30 {
+        let (_, c, dc, d2c) = eval(t);
+        let d = [c[0] - xs[0], c[1] - xs[1]];
+        let f = d[0] * dc[0] + d[1] * dc[1];
+        let df = dc[0] * dc[0] + dc[1] * dc[1] + d[0] * d2c[0] + d[1] * d2c[1];
+        if df <= 0.0 {
+            return None;
+        }
+        let step = f / df;
+        t -= step;
+        if step.abs() < 1e-15 {
+            break;
         }
     }
-    Gap {
-        gap_mm: c / l,
-        xi: (a[0] * b[0] + a[1] * b[1]) / l2,
-        gradient,
-        hessian,
+    if !t.is_finite() {
+        return None;
+    }
+    let (weights, c, dc, _) = eval(t);
+    let tl = (dc[0] * dc[0] + dc[1] * dc[1]).sqrt();
+    let normal = [-dc[1] / tl, dc[0] / tl];
+    Some(Gap {
+        gap_mm: (xs[0] - c[0]) * normal[0] + (xs[1] - c[1]) * normal[1],
+        t,
+        normal,
+        weights,
+    })
+}
+
+/// A control point of the master spline as a combination of nodal positions:
+/// `P = sum coef * diag(sign_r, 1) x_node`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct ControlTerm {
+    node: usize,
+    coef: f64,
+    /// -1 for the mirror image across the axis.
+    sign_r: f64,
+}
+
+/// One master spline segment: its four control points.
+#[derive(Debug, Clone)]
+struct Segment {
+    control: [Vec<ControlTerm>; 4],
+    /// Distinct nodes the segment depends on.
+    nodes: Vec<usize>,
+}
+
+impl Segment {
+    fn control_points(&self, position: &dyn Fn(usize) -> [f64; 2]) -> [[f64; 2]; 4] {
+        std::array::from_fn(|k| {
+            let mut p = [0.0; 2];
+            for c in &self.control[k] {
+                let x = position(c.node);
+                p[0] += c.coef * c.sign_r * x[0];
+                p[1] += c.coef * x[1];
+            }
+            p
+        })
+    }
+
+    /// Gradient of the gap with respect to (x_s, nodes...) in dof order.
+    fn gap_gradient(&self, g: &Gap) -> Vec<f64> {
+        let mut grad = vec![0.0; 2 + 2 * self.nodes.len()];
+        grad[0] = g.normal[0];
+        grad[1] = g.normal[1];
+        for (k, terms) in self.control.iter().enumerate() {
+            for c in terms {
+                let Some(j) = self.nodes.iter().position(|&n| n == c.node) else {
+                    continue;
+                };
+                grad[2 + 2 * j] -= g.weights[k] * c.coef * c.sign_r * g.normal[0];
+                grad[3 + 2 * j] -= g.weights[k] * c.coef * g.normal[1];
+            }
+        }
+        grad
+    }
+}
+
+/// C1-smoothed `<s>` with half-width `d` and its derivative:
+/// `s` for `s >= d`, `(s + d)^2 / (4 d)` for `|s| < d`, 0 below.
+pub fn smooth_ramp(s: f64, d: f64) -> (f64, f64) {
+    if d <= 0.0 {
+        return if s > 0.0 { (s, 1.0) } else { (0.0, 0.0) };
+    }
+    if s >= d {
+        (s, 1.0)
+    } else if s > -d {
+        ((s + d) * (s + d) / (4.0 * d), (s + d) / (2.0 * d))
+    } else {
+        (0.0, 0.0)
     }
 }
 
@@ -108,68 +194,188 @@ pub fn tributary_areas(points: &[[f64; 2]]) -> Vec<f64> {
     area
 }
 
-/// One active slave–segment pair: global nodes (slave, m1, m2), force, and its contribution
-/// to the residual (internal-force convention) and tangent over the 6 coordinates.
+/// One active slave–segment pair: global nodes (slave first), force, and its contribution
+/// to the residual (internal-force convention) and tangent (row-major, dofs 2 per node).
 #[derive(Debug, Clone)]
 pub struct ContactTerm {
     pub slave_index: usize,
-    pub nodes: [usize; 3],
+    pub nodes: Vec<usize>,
     pub normal_force: f64,
     pub gap_mm: f64,
-    pub residual: [f64; 6],
-    pub tangent: [[f64; 6]; 6],
+    pub residual: Vec<f64>,
+    pub tangent: Vec<f64>,
 }
 
 /// The shell–sample contact pair and its augmentation state.
 #[derive(Debug, Clone)]
 pub struct ContactPair {
-    /// Slave nodes (shell outer surface) from the axis outwards.
+    /// Slave nodes (sample top) from the axis outwards.
     pub slaves: Vec<usize>,
-    /// Master nodes (sample top) ordered by increasing r.
+    /// Master nodes (shell outer surface), ordered so the outward normal points out of
+    /// the master body.
     pub masters: Vec<usize>,
+    segments: Vec<Segment>,
     /// Reference tributary areas of the slave nodes.
     pub slave_areas_mm2: Vec<f64>,
     /// Penalty parameter (kPa/mm).
     pub penalty_kpa_per_mm: f64,
     /// Augmented-Lagrangian multipliers (force, mN) per slave node.
     pub multipliers: Vec<f64>,
+    /// Gap width (mm) over which the force law is smoothed.
+    pub smoothing_gap_mm: f64,
+}
+
+fn build_segments(masters: &[usize], nodes: &[[f64; 2]]) -> Vec<Segment> {
+    let n = masters.len();
+    let on_axis = |k: usize| nodes[masters[k]][0].abs() < 1e-12;
+    let term = |k: usize| ControlTerm {
+        node: masters[k],
+        coef: 1.0,
+        sign_r: 1.0,
+    };
+    // control point with index k in -1 ..= n (ends: mirror across the axis, or linear
+    // extrapolation)
+    let control = |k: isize| -> Vec<ControlTerm> {
+        if k >= 0 && (k as usize) < n {
+            vec![term(k as usize)]
+        } else if k < 0 {
+            if on_axis(0) {
+                vec![ControlTerm { sign_r: -1.0, ..term(1) }]
+            } else {
+                vec![ControlTerm { coef: 2.0, ..term(0) }, ControlTerm { coef: -1.0, ..term(1) }]
+            }
+        } else if on_axis(n - 1) {
+            vec![ControlTerm { sign_r: -1.0, ..term(n - 2) }]
+        } else {
+            vec![
+                ControlTerm { coef: 2.0, ..term(n - 1) },
+                ControlTerm { coef: -1.0, ..term(n - 2) },
+            ]
+        }
+    };
+    (0..n.saturating_sub(1))
+        .map(|i| {
+            let i = i as isize;
+            let control = [control(i - 1), control(i), control(i + 1), control(i + 2)];
+            let mut seg_nodes: Vec<usize> = Vec::new();
+            for c in control.iter().flatten() {
+                if !seg_nodes.contains(&c.node) {
+                    seg_nodes.push(c.node);
+                }
+            }
+            Segment {
+                control,
+                nodes: seg_nodes,
+            }
+        })
+        .collect()
 }
 
 impl ContactPair {
-    pub fn new(slaves: Vec<usize>, masters: Vec<usize>, nodes: &[[f64; 2]], penalty: f64) -> Self {
+    pub fn new(
+        slaves: Vec<usize>,
+        masters: Vec<usize>,
+        nodes: &[[f64; 2]],
+        penalty: f64,
+        smoothing_gap_mm: f64,
+    ) -> Self {
         let pts: Vec<[f64; 2]> = slaves.iter().map(|&n| nodes[n]).collect();
         let slave_areas_mm2 = tributary_areas(&pts);
         let n = slaves.len();
+        let segments = build_segments(&masters, nodes);
         Self {
             slaves,
             masters,
+            segments,
             slave_areas_mm2,
             penalty_kpa_per_mm: penalty,
             multipliers: vec![0.0; n],
+            smoothing_gap_mm,
         }
     }
 
-    /// Closest master segment (index into `masters` windows) for a slave at `xs`.
+    /// Closest master segment for a slave at `xs`: (segment index, gap).
     fn project(&self, xs: [f64; 2], position: &dyn Fn(usize) -> [f64; 2]) -> Option<(usize, Gap)> {
         let mut best: Option<(usize, Gap)> = None;
-        for k in 0..self.masters.len().saturating_sub(1) {
-            let x1 = position(self.masters[k]);
-            let x2 = position(self.masters[k + 1]);
-            // cheap reject: the slave's r must be near the segment's r range
-            let (lo, hi) = if x1[0] < x2[0] { (x1[0], x2[0]) } else { (x2[0], x1[0]) };
-            let span = hi - lo;
-            if xs[0] < lo - span || xs[0] > hi + span {
+        let mut best_inside = false;
+        for (e, seg) in self.segments.iter().enumerate() {
+            let p = seg.control_points(position);
+            // cheap reject by the bounding box of the segment's end points
+            let (a, b) = (p[1], p[2]);
+            let margin = (a[0] - b[0]).abs().max((a[1] - b[1]).abs());
+            if xs[0] < a[0].min(b[0]) - margin
+                || xs[0] > a[0].max(b[0]) + margin
+                || xs[1] < a[1].min(b[1]) - margin
+                || xs[1] > a[1].max(b[1]) + margin
+            {
                 continue;
             }
-            let g = gap(xs, x1, x2);
-            if !(-1e-9..=1.0 + 1e-9).contains(&g.xi) {
+            let Some(g) = gap(xs, &p) else {
+                continue;
+            };
+            // the spline is C1, so a projection inside [0, 1] is the closest point; keep a
+            // slightly extrapolated one only if no segment contains the projection
+            let inside = (0.0..=1.0).contains(&g.t);
+            if !inside && !(-0.05..=1.05).contains(&g.t) {
                 continue;
             }
-            if best.as_ref().is_none_or(|(_, b)| g.gap_mm.abs() < b.gap_mm.abs()) {
-                best = Some((k, g));
+            let better = match &best {
+                None => true,
+                Some((_, b)) => {
+                    (inside && !best_inside)
+                        || (inside == best_inside && g.gap_mm.abs() < b.gap_mm.abs())
+                }
+            };
+            if better {
+                best = Some((e, g));
+                best_inside = inside;
             }
         }
         best
+    }
+
+    /// Gap and its gradient for segment `seg` with the slave at `xs` and the segment's nodes
+    /// at `coords` (in `seg.nodes` order).
+    fn gap_and_gradient(&self, seg: &Segment, xs: [f64; 2], coords: &[[f64; 2]]) -> Option<(Gap, Vec<f64>)> {
+        let pos = |node: usize| {
+            let j = seg.nodes.iter().position(|&n| n == node).unwrap_or(0);
+            coords[j]
+        };
+        let g = gap(xs, &seg.control_points(&pos))?;
+        let grad = seg.gap_gradient(&g);
+        Some((g, grad))
+    }
+
+    /// Hessian of the gap by central differences of the analytic gradient, symmetrised.
+    fn gap_hessian(&self, seg: &Segment, xs: [f64; 2], coords: &[[f64; 2]]) -> Option<Vec<f64>> {
+        let n = 2 + 2 * coords.len();
+        let step = 1e-7;
+        let mut h = vec![0.0; n * n];
+        for m in 0..n {
+            let perturbed = |delta: f64| {
+                let mut xs2 = xs;
+                let mut c2 = coords.to_vec();
+                if m < 2 {
+                    xs2[m] += delta;
+                } else {
+                    c2[(m - 2) / 2][m % 2] += delta;
+                }
+                self.gap_and_gradient(seg, xs2, &c2).map(|(_, g)| g)
+            };
+            let gp = perturbed(step)?;
+            let gm = perturbed(-step)?;
+            for k in 0..n {
+                h[k * n + m] = (gp[k] - gm[k]) / (2.0 * step);
+            }
+        }
+        for a in 0..n {
+            for b in 0..a {
+                let s = 0.5 * (h[a * n + b] + h[b * n + a]);
+                h[a * n + b] = s;
+                h[b * n + a] = s;
+            }
+        }
+        Some(h)
     }
 
     /// Active contact terms at the current configuration.
@@ -177,25 +383,36 @@ impl ContactPair {
         let mut terms = Vec::new();
         for (s, &slave) in self.slaves.iter().enumerate() {
             let xs = position(slave);
-            let Some((k, g)) = self.project(xs, position) else {
+            let Some((e, _)) = self.project(xs, position) else {
+                continue;
+            };
+            let seg = &self.segments[e];
+            let coords: Vec<[f64; 2]> = seg.nodes.iter().map(|&n| position(n)).collect();
+            let Some((g, grad)) = self.gap_and_gradient(seg, xs, &coords) else {
                 continue;
             };
             let stiff = self.penalty_kpa_per_mm * self.slave_areas_mm2[s];
-            let force = self.multipliers[s] - stiff * g.gap_mm;
+            let (force, slope) = smooth_ramp(
+                self.multipliers[s] - stiff * g.gap_mm,
+                stiff * self.smoothing_gap_mm,
+            );
             if force <= 0.0 {
                 continue;
             }
-            let mut residual = [0.0; 6];
-            let mut tangent = [[0.0; 6]; 6];
-            for m in 0..6 {
-                residual[m] = -force * g.gradient[m];
-                for n in 0..6 {
-                    tangent[m][n] = stiff * g.gradient[m] * g.gradient[n] - force * g.hessian[m][n];
+            let n = grad.len();
+            let hess = self.gap_hessian(seg, xs, &coords).unwrap_or_else(|| vec![0.0; n * n]);
+            let residual: Vec<f64> = grad.iter().map(|d| -force * d).collect();
+            let mut tangent = vec![0.0; n * n];
+            for a in 0..n {
+                for b in 0..n {
+                    tangent[a * n + b] = stiff * slope * grad[a] * grad[b] - force * hess[a * n + b];
                 }
             }
+            let mut nodes = vec![slave];
+            nodes.extend_from_slice(&seg.nodes);
             terms.push(ContactTerm {
                 slave_index: s,
-                nodes: [slave, self.masters[k], self.masters[k + 1]],
+                nodes,
                 normal_force: force,
                 gap_mm: g.gap_mm,
                 residual,
@@ -232,7 +449,7 @@ impl ContactPair {
                 continue;
             };
             let stiff = self.penalty_kpa_per_mm * self.slave_areas_mm2[s];
-            let f = (self.multipliers[s] - stiff * g).max(0.0);
+            let (f, _) = smooth_ramp(self.multipliers[s] - stiff * g, stiff * self.smoothing_gap_mm);
             if f > 0.0 {
                 max_pen = max_pen.max(-g);
             }
@@ -247,32 +464,58 @@ mod tests {
     use super::*;
 
     #[test]
-    fn gap_sign_and_projection() {
-        let g = gap([0.5, 0.2], [0.0, 0.0], [1.0, 0.0]);
+    fn gap_on_a_straight_spline() {
+        // collinear control points from r = 1 to r = -1: tangent -r, outward normal -z
+        let p = [[2.0, 0.0], [1.0, 0.0], [-1.0, 0.0], [-2.0, 0.0]];
+        let g = gap([0.5, -0.2], &p).unwrap();
         assert!((g.gap_mm - 0.2).abs() < 1e-14);
-        assert!((g.xi - 0.5).abs() < 1e-14);
-        let g = gap([0.25, -0.1], [0.0, 0.0], [1.0, 0.0]);
+        let g = gap([0.25, 0.1], &p).unwrap();
         assert!((g.gap_mm + 0.1).abs() < 1e-14);
     }
 
+    /// Master: a circular arc (the shell's outer surface) through 9 nodes from the equator
+    /// to the apex on the axis; slave: one node below the apex region.
+    fn arc_pair() -> (Vec<[f64; 2]>, ContactPair) {
+        let mut nodes: Vec<[f64; 2]> = (0..9)
+            .map(|k| {
+                let phi = std::f64::consts::FRAC_PI_2 * (8 - k) as f64 / 8.0;
+                [5.0 * phi.sin(), -5.0 * phi.cos()]
+            })
+            .collect();
+        nodes.push([0.37, -5.02]);
+        let pair = ContactPair::new(vec![9], (0..9).collect(), &nodes, 1000.0, 0.0);
+        (nodes, pair)
+    }
+
     #[test]
-    fn gap_derivatives_match_finite_differences() {
-        let x = [[0.41, -0.03], [0.1, 0.02], [0.93, -0.11]];
-        let flat = |x: &[[f64; 2]; 3]| gap(x[0], x[1], x[2]);
-        let base = flat(&x);
-        let step = 1e-6;
-        for m in 0..6 {
-            let mut xp = x;
-            let mut xm = x;
-            xp[m / 2][m % 2] += step;
-            xm[m / 2][m % 2] -= step;
-            let gp = flat(&xp);
-            let gm = flat(&xm);
-            assert!(((gp.gap_mm - gm.gap_mm) / (2.0 * step) - base.gradient[m]).abs() < 1e-8);
-            for n in 0..6 {
-                let fd = (gp.gradient[n] - gm.gradient[n]) / (2.0 * step);
-                assert!((fd - base.hessian[n][m]).abs() < 1e-7, "H[{n}][{m}]");
-            }
+    fn gap_gradient_and_hessian_match_finite_differences() {
+        let (nodes, pair) = arc_pair();
+        let pos = |n: usize| nodes[n];
+        let (e, _) = pair.project(nodes[9], &pos).unwrap();
+        let seg = &pair.segments[e];
+        let coords: Vec<[f64; 2]> = seg.nodes.iter().map(|&n| nodes[n]).collect();
+        let (g0, grad) = pair.gap_and_gradient(seg, nodes[9], &coords).unwrap();
+        // exact circle: gap ~ 0.02 (spline error is O(h^4))
+        assert!((g0.gap_mm - (((0.37f64).powi(2) + 5.02f64.powi(2)).sqrt() - 5.0)).abs() < 1e-3);
+        let hess = pair.gap_hessian(seg, nodes[9], &coords).unwrap();
+        let n = grad.len();
+        let step = 1e-5;
+        for m in 0..n {
+            let eval = |d: f64| {
+                let mut xs = nodes[9];
+                let mut c = coords.clone();
+                if m < 2 {
+                    xs[m] += d;
+                } else {
+                    c[(m - 2) / 2][m % 2] += d;
+                }
+                pair.gap_and_gradient(seg, xs, &c).unwrap().0.gap_mm
+            };
+            let (gp, gm) = (eval(step), eval(-step));
+            // central differences: O(step^2) truncation
+            assert!(((gp - gm) / (2.0 * step) - grad[m]).abs() < 1e-7, "dg[{m}]");
+            let fd2 = (gp - 2.0 * g0.gap_mm + gm) / (step * step);
+            assert!((fd2 - hess[m * n + m]).abs() < 1e-3 * (1.0 + fd2.abs()), "H[{m}][{m}]");
         }
     }
 

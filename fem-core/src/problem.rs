@@ -9,7 +9,7 @@
 //!   on non-convergence. Contact is frictionless penalty/augmented-Lagrangian (eqs. 3–4).
 //!
 //! Outputs per step: u_s (eq. 6), contact radius a (zero crossing of the contact indicator
-//! `lambda / A - eps g` along the shell surface, linear interpolation between nodes), load P
+//! `lambda / A - eps g` along the sample surface, linear interpolation between nodes), load P
 //! (total normal contact force), contact pressure profile and the enclosed inner volume.
 
 use std::time::Instant;
@@ -70,6 +70,10 @@ pub struct SolverSettings {
     pub formulation: Formulation,
     /// Penalty = factor * min(E1, E2) / (sample fine element size).
     pub penalty_factor: f64,
+    /// Largest Newton correction as a fraction of the sample's fine element size.
+    pub max_correction: f64,
+    /// Contact force-law smoothing width as a fraction of the sample's fine element size.
+    pub contact_smoothing: f64,
     /// Maximum Uzawa augmentations per load step (0: pure penalty).
     pub augmentations: usize,
     /// Augmentation stops when the largest penetration is below this (mm).
@@ -87,7 +91,9 @@ impl SolverSettings {
         Self {
             mesh: MeshSpec::for_level(level),
             formulation: Formulation::Mixed,
-            penalty_factor: 100.0,
+            penalty_factor: std::env::var("FEM_PF").ok().and_then(|s| s.parse().ok()).unwrap_or(100.0),
+            contact_smoothing: 1e-4,
+            max_correction: 0.25,
             augmentations: 3,
             penetration_tolerance_mm: 2e-4,
             stage1_steps: 3,
@@ -158,6 +164,9 @@ pub struct Indentation {
     pub sample: Option<SampleMesh>,
     /// z dofs of the clamped skirt nodes (prescribed to -h).
     pub clamp_z_dofs: Vec<usize>,
+    /// The converged state before the current one (travel, displacements), for the
+    /// secant predictor of stage 2.
+    previous: Option<(f64, Vec<f64>)>,
 }
 
 impl Indentation {
@@ -212,19 +221,26 @@ impl Indentation {
         if let Some(s) = &sample {
             let soft_kpa = params.shell_modulus_kpa.min(params.sample_modulus_kpa);
             let penalty = settings.penalty_factor * soft_kpa / settings.mesh.sample_fine_size_mm;
+            // slave: the sample's top; master: the shell's outer surface from the equator
+            // to the apex (outward normal pointing out of the shell)
+            let mut masters = shell.outer_surface.clone();
+            masters.reverse();
             model.contact = Some(ContactPair::new(
-                shell.outer_surface.clone(),
                 s.top.clone(),
+                masters,
                 &model.mesh.nodes,
                 penalty,
+                settings.contact_smoothing * settings.mesh.sample_fine_size_mm,
             ));
         }
+        model.newton.max_correction_mm = settings.max_correction * settings.mesh.sample_fine_size_mm;
         let clamp_z_dofs = shell.clamped.iter().map(|&n| 2 * n + 1).collect();
         Self {
             model,
             shell,
             sample,
             clamp_z_dofs,
+            previous: None,
         }
     }
 
@@ -244,6 +260,24 @@ impl Indentation {
         p_kpa: f64,
         settings: &SolverSettings,
     ) -> Result<(), NewtonFailure> {
+        // predictor: secant extrapolation of the last converged increment when there is
+        // one, otherwise translate the shell rigidly with the tube
+        if let Some((h_prev, u_prev)) = &self.previous {
+            let h_now = self.clamp_z_dofs.first().map_or(0.0, |&d| -u[d]);
+            let dh_prev = h_now - h_prev;
+            if dh_prev.abs() > 1e-12 {
+                let factor = (h_mm - h_now) / dh_prev;
+                for (x, x_prev) in u.iter_mut().zip(u_prev) {
+                    *x += factor * (*x - x_prev);
+                }
+            }
+        } else if let Some(&d) = self.clamp_z_dofs.first() {
+            let shift = -h_mm - u[d];
+            let b = self.shell.block;
+            for n in b.node_offset..b.node_offset + b.n1 * b.n2 {
+                u[2 * n + 1] += shift;
+            }
+        }
         self.set_tube_travel(h_mm);
         self.model.solve_equilibrium(u, p_kpa)?;
         for _ in 0..settings.augmentations {
@@ -274,8 +308,9 @@ impl Indentation {
         let mut contact_pressure = Vec::new();
         if let Some(contact) = &model.contact {
             let pos = |n: usize| model.position(u, n);
+            // the slave (sample) z residual is -f dg/dz_s = f |n_z|: the downward push
             for term in contact.active_terms(&pos) {
-                load_mn -= term.residual[1];
+                load_mn += term.residual[1];
             }
             let gaps = contact.slave_gaps(&pos);
             let current: Vec<[f64; 2]> = contact.slaves.iter().map(|&n| pos(n)).collect();
@@ -290,20 +325,25 @@ impl Indentation {
                     None => f64::NEG_INFINITY,
                 })
                 .collect();
-            for s in 0..indicator.len() {
+            // the contact zone is a disc: its edge is the crossing after the outermost node
+            // in contact (single nodes near the axis may stand off by round-off of the
+            // quadratic surface, so the scan does not stop at the first open node)
+            let last_in = indicator.iter().rposition(|&q| q > 0.0);
+            let end = last_in.map_or(0, |k| (k + 1).min(indicator.len() - 1));
+            if let Some(k) = last_in {
+                a_mm = current[k][0];
+                if k + 1 < indicator.len() {
+                    let (q0, q1) = (indicator[k], indicator[k + 1]);
+                    let t = if q1.is_finite() { q0 / (q0 - q1) } else { 0.0 };
+                    a_mm += t * (current[k + 1][0] - current[k][0]);
+                }
+            }
+            for s in 0..=end {
                 let force = (indicator[s] * contact.slave_areas_mm2[s]).max(0.0);
                 contact_pressure.push(ContactPressureSample {
                     r_mm: current[s][0],
                     pressure_kpa: if areas[s] > 0.0 { force / areas[s] } else { 0.0 },
                 });
-                if indicator[s] <= 0.0 {
-                    if s > 0 {
-                        let (q0, q1) = (indicator[s - 1], indicator[s]);
-                        let t = if q1.is_finite() { q0 / (q0 - q1) } else { 1.0 };
-                        a_mm = current[s - 1][0] + t * (current[s][0] - current[s - 1][0]);
-                    }
-                    break;
-                }
             }
         }
         CurvePoint {
@@ -327,7 +367,7 @@ fn continuation(
     state: &mut Vec<f64>,
     mut solve: impl FnMut(f64, &mut Vec<f64>) -> Result<(), NewtonFailure>,
     mut on_failure_restore: impl FnMut(),
-    mut on_success_commit: impl FnMut(),
+    mut on_success_commit: impl FnMut(&[f64]),
     stage: &'static str,
     unit: &'static str,
 ) -> Result<(), FemError> {
@@ -339,9 +379,9 @@ fn continuation(
         let mut trial = state.clone();
         match solve(target, &mut trial) {
             Ok(()) => {
+                on_success_commit(state);
                 *state = trial;
                 done = target;
-                on_success_commit();
                 if cuts > 0 {
                     cuts -= 1;
                     step *= 2.0;
@@ -393,7 +433,7 @@ pub fn solve_curve_with(params: &CurveParams, settings: &SolverSettings) -> Resu
             &mut u,
             |p, state| cell.borrow_mut().solve_equilibrium(state, p).map(|_| ()),
             || {},
-            || {},
+            |_: &[f64]| {},
             "stage 1 (inflation)",
             "kPa",
         )?;
@@ -429,9 +469,11 @@ pub fn solve_curve_with(params: &CurveParams, settings: &SolverSettings) -> Resu
                     c.multipliers.clone_from(saved);
                 }
             },
-            || {
-                let ind = ind_cell.borrow();
+            |before: &[f64]| {
+                let mut ind = ind_cell.borrow_mut();
                 *committed.borrow_mut() = ind.model.contact.as_ref().map(|c| c.multipliers.clone());
+                let h_before = ind.clamp_z_dofs.first().map_or(0.0, |&d| -before[d]);
+                ind.previous = Some((h_before, before.to_vec()));
             },
             "stage 2 (indentation)",
             "mm of tube travel",

@@ -1,0 +1,45 @@
+//! Solve one a–u_s curve and print it: `cargo run -p fem-core --release --example curve --
+//! [modulus_kpa] [pressure_kpa] [mesh_level] [steps] [depth_mm]`.
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let args: Vec<f64> = std::env::args()
+        .skip(1)
+        .map(|a| a.parse::<f64>())
+        .collect::<Result<_, _>>()?;
+    let get = |i: usize, d: f64| args.get(i).copied().unwrap_or(d);
+    let params = fem_core::CurveParams {
+        sample_modulus_kpa: get(0, 200.0),
+        pressure_kpa: get(1, 6.0),
+        mesh_level: get(2, 0.0) as i32,
+        steps: get(3, 40.0) as usize,
+        max_depth_mm: get(4, 2.0),
+        ..Default::default()
+    };
+    let curve = fem_core::solve_curve(&params)?;
+    println!(
+        "rest volume {:.3} mm3, inflated {:.3} mm3, inflation apex {:.4} mm",
+        curve.rest_volume_mm3, curve.inflated_volume_mm3, curve.inflation_apex_mm
+    );
+    println!("h_mm u_s_mm a_mm load_n volume_mm3 max_pressure_kpa");
+    for p in &curve.points {
+        let pmax = p
+            .contact_pressure
+            .iter()
+            .map(|s| s.pressure_kpa)
+            .fold(0.0, f64::max);
+        println!(
+            "{:.4} {:.5} {:.5} {:.6} {:.4} {:.3}",
+            p.h_mm, p.u_s_mm, p.a_mm, p.load_n, p.volume_mm3, pmax
+        );
+    }
+    if std::env::var_os("FEM_PROFILE").is_some() {
+        for p in &curve.points {
+            println!("h = {}", p.h_mm);
+            for s in &p.contact_pressure {
+                println!("   r {:.4} p {:.3}", s.r_mm, s.pressure_kpa);
+            }
+        }
+    }
+    println!("solve time {:.3} s", curve.solve_seconds);
+    Ok(())
+}
