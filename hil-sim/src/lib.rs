@@ -6,10 +6,13 @@
 //! renderer), [`effects`] (hidden effects in the ground truth), [`faults`] (injected
 //! faults), [`rng`] (seeded noise); [`scenario`] reads all of it from a TOML file.
 
+pub mod bench;
 pub mod camera;
+pub mod device;
 pub mod effects;
 pub mod faults;
 pub mod mechanics;
+pub mod mechanics_source;
 pub mod pneumatics;
 pub mod rng;
 pub mod scenario;

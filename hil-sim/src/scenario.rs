@@ -72,7 +72,7 @@ pub enum MechanicsSource {
         max_depth_mm: f64,
     },
     /// A rigid flat sample (calibration).
-    Rigid,
+    Rigid {},
 }
 
 fn default_modulus_factors() -> Vec<f64> {
@@ -253,7 +253,7 @@ impl Scenario {
         match &mut self.mechanics {
             MechanicsSource::Lut { path } => fix(path),
             MechanicsSource::Curves { files } => files.iter_mut().for_each(fix),
-            MechanicsSource::Solve { .. } | MechanicsSource::Rigid => {}
+            MechanicsSource::Solve { .. } | MechanicsSource::Rigid {} => {}
         }
     }
 
@@ -481,7 +481,7 @@ mod tests {
         "#;
         let s = Scenario::parse(text, Path::new("inline.toml")).unwrap();
         assert_eq!(s.seed, 42);
-        assert_eq!(s.mechanics, MechanicsSource::Rigid);
+        assert_eq!(s.mechanics, MechanicsSource::Rigid {});
         assert_eq!(
             s.programme[0].request,
             Some(Request::SetPressure { setpoint_kpa: 6.0 })
@@ -515,6 +515,13 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("programme[0]"), "{e}");
+        let e = Scenario::parse(
+            "[mechanics]\nsource = \"rigid\"\nstray = 1\n",
+            Path::new("m.toml"),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("m.toml") && e.contains("stray"), "{e}");
         let e = Scenario::load(Path::new("/nonexistent/x.toml"))
             .unwrap_err()
             .to_string();
