@@ -275,10 +275,17 @@ impl SimDevice {
         self.tx.drain(..).collect()
     }
 
-    /// Host time of the USB frame boundary at or after `t_s`.
+    /// Host time of the USB frame boundary at or after `t_s` (OUT: host -> device).
     fn usb_boundary(&self, t_s: f64) -> f64 {
         let frame = self.scenario.link.usb_frame_us * 1e-6;
         (t_s / frame).ceil() * frame
+    }
+
+    /// Host time of the first USB frame boundary strictly after `t_s` (IN: the host polls
+    /// for device data in a later frame than the one that produced it).
+    fn usb_next_boundary(&self, t_s: f64) -> f64 {
+        let frame = self.scenario.link.usb_frame_us * 1e-6;
+        ((t_s / frame).floor() + 1.0) * frame
     }
 
     /// Applies the link's byte faults; returns the bytes that survive.
@@ -328,7 +335,7 @@ impl SimDevice {
             return;
         }
         self.stats.bytes_to_host += bytes.len() as u64;
-        let arrival = self.usb_boundary(t_s);
+        let arrival = self.usb_next_boundary(t_s);
         match self.tx.back_mut() {
             Some(last) if last.t_s == arrival => last.bytes.extend_from_slice(&bytes),
             _ => self.tx.push_back(TxChunk {

@@ -4,6 +4,8 @@
 //! to k pi (R^2 + sigma^2) for an ellipse of axis ratio k blurred by sigma (the convolution
 //! with a normalised kernel preserves the area; the straight-edge profile adds pi sigma^2).
 
+#![allow(clippy::unwrap_used)] // tests may unwrap
+
 use hil_sim::camera::{CameraConfig, CameraRenderer, FrameScene, PixelFormat};
 use hil_sim::rng::SimRng;
 

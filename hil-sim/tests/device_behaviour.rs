@@ -1,6 +1,8 @@
 //! The firmware's controller inside the simulated bench: pressure regulation against the
 //! indentation disturbance, the safety supervisor, and reproducibility.
 
+#![allow(clippy::unwrap_used)] // tests may unwrap
+
 use std::path::Path;
 
 use firmware::safety::OVERPRESSURE_CLEAR_MARGIN_KPA;
