@@ -16,10 +16,10 @@ pub mod interp;
 pub mod pchip;
 pub mod table;
 
-pub use build::{CurveReport, build_lut};
+pub use build::{CurveReport, build_lut, fem_solver_description};
 pub use error::LutError;
 pub use format::{
-    LUT_FORMAT_VERSION, LUT_MAGIC, read_lut, read_lut_bytes, write_lut, write_lut_bytes,
+    LUT_FORMAT_VERSION, LUT_MAGIC, LutFile, read_lut, read_lut_bytes, write_lut, write_lut_bytes,
 };
 pub use grid::{EffectAxes, EffectSelection, GridIndex, LutGrid, Shard};
 pub use interp::{LutQuery, LutSample, LutSlice, OutOfRange};

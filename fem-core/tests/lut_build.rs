@@ -12,7 +12,7 @@ use fem_core::lut::{
     write_lut_bytes,
 };
 use fem_core::{CurveParams, MaterialLaw};
-use lut_common::standin_solver;
+use lut_common::{STANDIN, standin_solver};
 
 fn grid() -> LutGrid {
     let base = CurveParams {
@@ -32,7 +32,7 @@ fn grid() -> LutGrid {
 fn quiet(_: &fem_core::lut::CurveReport) {}
 
 fn full_build() -> Lut {
-    build_lut(&grid(), None, &standin_solver, &quiet).unwrap()
+    build_lut(&grid(), None, &standin_solver, STANDIN, &quiet).unwrap()
 }
 
 #[test]
@@ -43,11 +43,11 @@ fn shards_merge_to_the_single_process_build_bit_for_bit() {
             .rev() // merge order must not matter
             .map(|k| {
                 let s = Shard { index: k, count: n };
-                let lut = build_lut(&grid(), Some(s), &standin_solver, &quiet).unwrap();
+                let lut = build_lut(&grid(), Some(s), &standin_solver, STANDIN, &quiet).unwrap();
                 // every shard survives its own file round trip
                 let (bytes, _) = write_lut_bytes(&lut).unwrap();
-                let (back, _) = read_lut_bytes(&bytes, "shard").unwrap();
-                (format!("shard{k}"), back)
+                let back = read_lut_bytes(&bytes, "shard").unwrap();
+                (format!("shard{k}"), back.lut)
             })
             .collect();
         let merged = merge_shards(&shards).unwrap();
@@ -59,7 +59,7 @@ fn shards_merge_to_the_single_process_build_bit_for_bit() {
 #[test]
 fn shards_hold_every_nth_curve() {
     let s = Shard { index: 1, count: 4 };
-    let lut = build_lut(&grid(), Some(s), &standin_solver, &quiet).unwrap();
+    let lut = build_lut(&grid(), Some(s), &standin_solver, STANDIN, &quiet).unwrap();
     let idx: Vec<usize> = lut.curves.iter().map(|c| c.index).collect();
     assert_eq!(
         idx,
@@ -76,6 +76,7 @@ fn merge_rejects_missing_duplicate_and_foreign_shards() {
             g,
             Some(Shard { index: k, count: n }),
             &standin_solver,
+            STANDIN,
             &quiet,
         )
         .unwrap()
@@ -97,6 +98,21 @@ fn merge_rejects_missing_duplicate_and_foreign_shards() {
         err.to_string().contains("b was built on a different grid"),
         "{err}"
     );
+    let other_solver = build_lut(
+        &g,
+        Some(Shard { index: 1, count: 2 }),
+        &standin_solver,
+        "other",
+        &quiet,
+    )
+    .unwrap();
+    let err =
+        merge_shards(&[("a".into(), build(0, 2, &g)), ("b".into(), other_solver)]).unwrap_err();
+    assert!(
+        err.to_string()
+            .contains("b was built by a different solver"),
+        "{err}"
+    );
     let err = merge_shards(&[("full".into(), full_build())]).unwrap_err();
     assert!(
         err.to_string().contains("full is a complete table"),
@@ -111,10 +127,17 @@ fn file_round_trip_is_exact_and_repeatable() {
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("t.lut");
     let hash = write_lut(&path, &lut).unwrap();
-    let (back, header) = read_lut(&path).unwrap();
+    let file = read_lut(&path).unwrap();
+    let (back, header) = (file.lut, file.header);
+    assert_eq!(file.sha256, hash);
+    assert_eq!(
+        file.size_bytes as u64,
+        std::fs::metadata(&path).unwrap().len()
+    );
     assert_eq!(back, lut);
     assert_eq!(header.grid, grid());
     assert_eq!(header.mesh.mesh_level, 0);
+    assert_eq!(header.mesh.solver, STANDIN);
     assert_eq!(header.fem_core_version, env!("CARGO_PKG_VERSION"));
     // writing what was read gives the same bytes and hash (no timestamps, fixed order)
     let (bytes2, hash2) = write_lut_bytes(&back).unwrap();
@@ -189,11 +212,11 @@ fn failed_solves_are_recorded_not_fatal() {
             standin_solver(p)
         }
     };
-    let lut = build_lut(&grid(), None, &fails_when_soft, &quiet).unwrap();
+    let lut = build_lut(&grid(), None, &fails_when_soft, STANDIN, &quiet).unwrap();
     let failed: Vec<usize> = lut.failures().map(|c| c.index).collect();
     assert_eq!(failed.len(), 2); // E2 = 10 kPa, p = 6 kPa, both friction values
     let (bytes, _) = write_lut_bytes(&lut).unwrap();
-    let (back, _) = read_lut_bytes(&bytes, "f.lut").unwrap();
+    let back = read_lut_bytes(&bytes, "f.lut").unwrap().lut;
     assert_eq!(back, lut);
     assert_eq!(
         back.curve(failed[0]).unwrap().failure.as_deref(),
@@ -208,6 +231,6 @@ fn solver_answering_other_parameters_is_a_failure() {
         c.params.material = MaterialLaw::Linear;
         Ok::<_, String>(c)
     };
-    let lut = build_lut(&grid(), None, &wrong, &quiet).unwrap();
+    let lut = build_lut(&grid(), None, &wrong, STANDIN, &quiet).unwrap();
     assert_eq!(lut.failures().count(), grid().curve_count());
 }

@@ -12,7 +12,7 @@ use fem_core::CurveParams;
 use fem_core::lut::{
     EffectSelection, Lut, LutError, LutGrid, LutQuery, OutOfRange, build_lut, grid::log_spaced,
 };
-use lut_common::{standin_a_mm, standin_solver};
+use lut_common::{STANDIN, standin_a_mm, standin_solver};
 
 fn table(per_decade: usize) -> Lut {
     let base = CurveParams {
@@ -25,7 +25,7 @@ fn table(per_decade: usize) -> Lut {
         log_spaced(10.0, 1000.0, 2 * per_decade + 1),
         vec![0.0, 6.0, 10.0, 15.0, 20.0, 30.0],
     );
-    build_lut(&g, None, &standin_solver, &|_| {}).unwrap()
+    build_lut(&g, None, &standin_solver, STANDIN, &|_| {}).unwrap()
 }
 
 /// Max relative errors of a and of d a / d ln E2 over a sweep of off-node queries.
@@ -256,7 +256,7 @@ fn a_failed_neighbour_curve_is_reported_by_name() {
         }
     };
     let g = table(6).grid;
-    let lut = build_lut(&g, None, &fails, &|_| {}).unwrap();
+    let lut = build_lut(&g, None, &fails, STANDIN, &|_| {}).unwrap();
     let slice = lut.slice(&EffectSelection::default()).unwrap();
     let err = slice
         .sample(

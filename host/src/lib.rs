@@ -2,5 +2,6 @@
 //! command lives here, `main.rs` only parses arguments and reports errors.
 
 pub mod camera;
+pub mod curve_csv;
 pub mod usb;
 pub mod vision;

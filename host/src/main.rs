@@ -21,6 +21,10 @@ enum Command {
     Devices(cli::devices::DevicesArgs),
     /// Convert firmware ELF to UF2, or flash it over PICOBOOT.
     Flash(cli::flash::FlashArgs),
+    /// Lookup table of simulated curves: build (sharded), merge, info.
+    Lut(cli::lut::LutArgs),
+    /// Finite-element simulation: write one simulated curve as a curve CSV.
+    Fem(cli::fem::FemArgs),
 }
 
 fn main() -> ExitCode {
@@ -29,5 +33,7 @@ fn main() -> ExitCode {
         Command::Radius(args) => cli::radius::run(args),
         Command::Devices(args) => cli::devices::run(args),
         Command::Flash(args) => cli::flash::run(args),
+        Command::Lut(args) => cli::lut::run(args),
+        Command::Fem(args) => cli::fem::run(args),
     }
 }

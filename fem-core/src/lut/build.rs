@@ -11,6 +11,15 @@ use super::grid::{LutGrid, Shard};
 use super::table::{Lut, LutCurve};
 use crate::curve::{Curve, CurveParams};
 
+/// Description of fem-core's own solver ([`crate::solve_curve`]) at a mesh level: its
+/// settings, including the mesh divisions, as recorded in tables it builds.
+pub fn fem_solver_description(mesh_level: i32) -> String {
+    format!(
+        "fem_core::solve_curve with {:?}",
+        crate::problem::SolverSettings::for_level(mesh_level)
+    )
+}
+
 /// Progress report for one finished curve (for printing; never stored in the table).
 #[derive(Debug, Clone)]
 pub struct CurveReport {
@@ -25,13 +34,15 @@ pub struct CurveReport {
 }
 
 /// Build the curves of `grid` (all of them, or those of `shard`) with `solver`, in parallel
-/// on the current rayon pool. `on_curve` is called as each curve finishes (from worker
+/// on the current rayon pool. `solver_description` is recorded in the table (say what the
+/// solver is and its settings, e.g. [`fem_solver_description`]). `on_curve` is called as each curve finishes (from worker
 /// threads, in completion order). A failed solve is recorded in the table (and reported),
 /// not fatal: the caller decides what to do with a table that has failures.
 pub fn build_lut<S, E>(
     grid: &LutGrid,
     shard: Option<Shard>,
     solver: &S,
+    solver_description: &str,
     on_curve: &(dyn Fn(&CurveReport) + Sync),
 ) -> Result<Lut, LutError>
 where
@@ -68,6 +79,7 @@ where
     Ok(Lut {
         grid: grid.clone(),
         fem_core_version: Lut::this_fem_core_version(),
+        solver: solver_description.to_string(),
         shard,
         curves,
     })

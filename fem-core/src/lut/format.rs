@@ -42,6 +42,8 @@ pub struct MeshDescription {
     /// halves the element size, negative values coarsen.
     pub mesh_level: i32,
     pub description: String,
+    /// The solver and its settings (mesh divisions, contact penalty, ...).
+    pub solver: String,
 }
 
 /// One curve's entry in the header.
@@ -94,6 +96,7 @@ impl LutHeader {
                     "fem-core axisymmetric mesh of shell and sample; level 0 = production \
                               mesh, +1 halves the element size, -1 doubles it"
                         .to_string(),
+                solver: lut.solver.clone(),
             },
             shard: lut.shard,
             curve_order: "index = (((material*n_friction + friction)*n_thickness + thickness)\
@@ -175,8 +178,18 @@ pub fn write_lut(path: &Path, lut: &Lut) -> Result<String, LutError> {
     Ok(hash)
 }
 
+/// A table as read from a file, with its header, content hash and size.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LutFile {
+    pub lut: Lut,
+    pub header: LutHeader,
+    /// Lower-case hex SHA-256 of the content (verified).
+    pub sha256: String,
+    pub size_bytes: usize,
+}
+
 /// Read and verify a table file.
-pub fn read_lut(path: &Path) -> Result<(Lut, LutHeader), LutError> {
+pub fn read_lut(path: &Path) -> Result<LutFile, LutError> {
     let bytes = std::fs::read(path).map_err(|source| LutError::Io {
         path: path.to_path_buf(),
         source,
@@ -200,7 +213,7 @@ fn split_line<'a>(
 }
 
 /// Parse and verify the bytes of a table file; `source_name` names it in errors.
-pub fn read_lut_bytes(bytes: &[u8], source_name: &str) -> Result<(Lut, LutHeader), LutError> {
+pub fn read_lut_bytes(bytes: &[u8], source_name: &str) -> Result<LutFile, LutError> {
     let fmt_err = |reason: String| LutError::Format {
         source_name: source_name.to_string(),
         reason,
@@ -314,11 +327,17 @@ pub fn read_lut_bytes(bytes: &[u8], source_name: &str) -> Result<(Lut, LutHeader
     let lut = Lut {
         grid: header.grid.clone(),
         fem_core_version: header.fem_core_version.clone(),
+        solver: header.mesh.solver.clone(),
         shard: header.shard,
         curves,
     };
     lut.validate().map_err(fmt_err)?;
-    Ok((lut, header))
+    Ok(LutFile {
+        lut,
+        header,
+        sha256: computed,
+        size_bytes: bytes.len(),
+    })
 }
 
 #[cfg(test)]

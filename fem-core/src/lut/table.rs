@@ -110,6 +110,9 @@ pub struct Lut {
     pub grid: LutGrid,
     /// Version of the fem-core crate that computed the curves.
     pub fem_core_version: String,
+    /// What computed the curves: the solver and its settings (mesh divisions, penalty,
+    /// ...), as given to [`build_lut`](super::build_lut).
+    pub solver: String,
     /// `Some` for a shard file, `None` for a complete table.
     pub shard: Option<Shard>,
     /// Curves sorted by grid index: every index of the grid (or of the shard) exactly once.
@@ -218,6 +221,13 @@ pub fn merge_shards(shards: &[(String, Lut)]) -> Result<Lut, LutError> {
                 "{name} was built on a different grid or base parameters than {first_name}"
             )));
         }
+        if lut.solver != first.solver {
+            return Err(LutError::Merge(format!(
+                "{name} was built by a different solver or solver settings than {first_name}: \
+                 {:?} vs {:?}",
+                lut.solver, first.solver
+            )));
+        }
         if lut.fem_core_version != first.fem_core_version {
             return Err(LutError::Merge(format!(
                 "{name} was built by fem-core {} but {first_name} by fem-core {}",
@@ -253,6 +263,7 @@ pub fn merge_shards(shards: &[(String, Lut)]) -> Result<Lut, LutError> {
     let merged = Lut {
         grid: first.grid.clone(),
         fem_core_version: first.fem_core_version.clone(),
+        solver: first.solver.clone(),
         shard: None,
         curves,
     };

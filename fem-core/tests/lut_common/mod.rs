@@ -16,6 +16,9 @@ use fem_core::{Curve, CurveParams, CurvePoint};
 
 pub const C_MM: f64 = 1.5;
 
+/// Solver description recorded in tables built with the stand-in.
+pub const STANDIN: &str = "analytic stand-in (TEST FIXTURE, not physics)";
+
 /// Closed-form a at (E2, p_air, u_s) of the stand-in.
 pub fn standin_a_mm(modulus_kpa: f64, pressure_kpa: f64, u_s_mm: f64) -> f64 {
     C_MM * (modulus_kpa / 100.0).powf(-1.0 / 3.0)

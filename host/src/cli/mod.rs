@@ -1,4 +1,7 @@
 //! Subcommand implementations; `main.rs` only dispatches.
+
 pub mod devices;
+pub mod fem;
 pub mod flash;
+pub mod lut;
 pub mod radius;

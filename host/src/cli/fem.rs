@@ -1,0 +1,174 @@
+//! `tactile fem curve`: simulate one indentation (fem-core) and write it as a measured-curve
+//! CSV (DESIGN.md section 7) with the extra columns `h_mm` and `volume_mm3`, and every model
+//! parameter as `# key: value` metadata.
+
+use clap::{Args, Subcommand, ValueEnum};
+use fem_core::{Curve, CurveParams, FemError, MaterialLaw};
+use host::curve_csv::{CurveCsv, CurveRow, Phase, write_curve_csv};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Debug, Args)]
+pub struct FemArgs {
+    #[command(subcommand)]
+    pub command: FemCommand,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum FemCommand {
+    /// Simulate one a–u_s curve and write it as a curve CSV.
+    Curve(CurveArgs),
+}
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
+pub enum Material {
+    /// Compressible neo-Hookean (the default).
+    NeoHookean,
+    /// Small-strain linear elasticity (verification).
+    Linear,
+}
+
+#[derive(Debug, Args)]
+pub struct CurveArgs {
+    /// Sample Young's modulus E2 in kPa (a very large value, e.g. 1e7, is a rigid sample).
+    #[arg(long, allow_negative_numbers = true)]
+    pub modulus: f64,
+    /// Internal gauge pressure p_air in kPa.
+    #[arg(long, allow_negative_numbers = true)]
+    pub pressure: f64,
+    /// Sample thickness in mm (default: the paper's gelatin, 7 mm).
+    #[arg(long)]
+    pub thickness: Option<f64>,
+    /// Sample radius in mm (default 45 mm).
+    #[arg(long)]
+    pub sample_radius: Option<f64>,
+    /// Coulomb friction coefficient (default 0: frictionless).
+    #[arg(long)]
+    pub friction: Option<f64>,
+    /// Material law of both bodies.
+    #[arg(long, value_enum, default_value = "neo-hookean")]
+    pub material: Material,
+    /// Final tube travel h in mm (default 2).
+    #[arg(long)]
+    pub depth: Option<f64>,
+    /// Number of load steps (default 40).
+    #[arg(long)]
+    pub steps: Option<usize>,
+    /// Mesh level (0 = production, +1 halves the element size, negative coarsens).
+    #[arg(long, allow_negative_numbers = true)]
+    pub mesh_level: Option<i32>,
+    /// Output CSV file.
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+pub fn run(args: FemArgs) -> ExitCode {
+    match args.command {
+        FemCommand::Curve(a) => curve(a),
+    }
+}
+
+/// The curve parameters the flags describe (defaults: `CurveParams::default()`).
+pub fn params_of(a: &CurveArgs) -> CurveParams {
+    let d = CurveParams::default();
+    CurveParams {
+        sample_modulus_kpa: a.modulus,
+        pressure_kpa: a.pressure,
+        sample_thickness_mm: a.thickness.unwrap_or(d.sample_thickness_mm),
+        sample_radius_mm: a.sample_radius.unwrap_or(d.sample_radius_mm),
+        friction: a.friction.unwrap_or(d.friction),
+        material: match a.material {
+            Material::NeoHookean => MaterialLaw::NeoHookean,
+            Material::Linear => MaterialLaw::Linear,
+        },
+        max_depth_mm: a.depth.unwrap_or(d.max_depth_mm),
+        steps: a.steps.unwrap_or(d.steps),
+        mesh_level: a.mesh_level.unwrap_or(d.mesh_level),
+        ..d
+    }
+}
+
+/// The curve CSV of a simulated curve: rows per load step (phase `load`), metadata with
+/// every parameter of `curve.params` and the stage-1 results.
+pub fn curve_csv_of(curve: &Curve) -> CurveCsv {
+    let p = &curve.params;
+    let material = match p.material {
+        MaterialLaw::NeoHookean => "neo-hookean",
+        MaterialLaw::Linear => "linear",
+    };
+    let metadata: Vec<(String, String)> = [
+        (
+            "source",
+            "tactile fem curve (fem-core simulation)".to_string(),
+        ),
+        (
+            "fem_core_version",
+            fem_core::lut::Lut::this_fem_core_version(),
+        ),
+        ("sample_modulus_kpa", p.sample_modulus_kpa.to_string()),
+        ("sample_poisson", p.sample_poisson.to_string()),
+        ("sample_radius_mm", p.sample_radius_mm.to_string()),
+        ("sample_thickness_mm", p.sample_thickness_mm.to_string()),
+        ("shell_modulus_kpa", p.shell_modulus_kpa.to_string()),
+        ("shell_poisson", p.shell_poisson.to_string()),
+        ("p_air_kpa", p.pressure_kpa.to_string()),
+        ("friction", p.friction.to_string()),
+        ("material", material.to_string()),
+        ("max_depth_mm", p.max_depth_mm.to_string()),
+        ("steps", p.steps.to_string()),
+        ("mesh_level", p.mesh_level.to_string()),
+        ("rest_volume_mm3", curve.rest_volume_mm3.to_string()),
+        ("inflated_volume_mm3", curve.inflated_volume_mm3.to_string()),
+        ("inflation_apex_mm", curve.inflation_apex_mm.to_string()),
+        ("solve_seconds", format!("{:.3}", curve.solve_seconds)),
+    ]
+    .into_iter()
+    .map(|(k, v)| (k.to_string(), v))
+    .collect();
+    let rows = curve
+        .points
+        .iter()
+        .map(|pt| CurveRow {
+            u_s_mm: pt.u_s_mm,
+            a_mm: pt.a_mm,
+            load_n: Some(pt.load_n),
+            p_air_kpa: Some(p.pressure_kpa),
+            phase: Some(Phase::Load),
+            h_mm: Some(pt.h_mm),
+            volume_mm3: Some(pt.volume_mm3),
+            ..CurveRow::default()
+        })
+        .collect();
+    CurveCsv { metadata, rows }
+}
+
+fn curve(a: CurveArgs) -> ExitCode {
+    let params = params_of(&a);
+    let curve = match fem_core::solve_curve(&params) {
+        Ok(c) => c,
+        Err(e @ FemError::InvalidParameter { .. }) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(2);
+        }
+        Err(e) => {
+            eprintln!("error: simulation failed: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    if let Err(e) = write_curve_csv(&a.out, &curve_csv_of(&curve)) {
+        eprintln!("error: {e}");
+        return ExitCode::from(2);
+    }
+    let last = curve.points.last();
+    eprintln!(
+        "wrote {} ({} steps, {:.2} s): at h = {} mm u_s = {:.4} mm, a = {:.4} mm, P = {:.4} N",
+        a.out.display(),
+        curve.points.len(),
+        curve.solve_seconds,
+        last.map_or(0.0, |p| p.h_mm),
+        last.map_or(0.0, |p| p.u_s_mm),
+        last.map_or(0.0, |p| p.a_mm),
+        last.map_or(0.0, |p| p.load_n),
+    );
+    ExitCode::SUCCESS
+}

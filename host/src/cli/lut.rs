@@ -1,0 +1,318 @@
+//! `tactile lut build|merge|info`: build the lookup table of simulated a–u_s curves (or one
+//! shard of it, for a cluster job array), merge shards, and describe a table file.
+//!
+//! A Slurm job array builds shard K of N with `--array=0-(N-1)` and
+//! `tactile lut build --shard $SLURM_ARRAY_TASK_ID/N --out shard-$SLURM_ARRAY_TASK_ID.lut`,
+//! then `tactile lut merge shard-*.lut --out default.lut` gives the same file, bit for bit,
+//! as a single-process build. The number of worker threads follows `RAYON_NUM_THREADS`.
+
+use clap::{Args, Subcommand, ValueEnum};
+use fem_core::lut::{
+    CurveReport, LutFile, LutGrid, Shard, build_lut, fem_solver_description, merge_shards,
+    read_lut, write_lut,
+};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Instant;
+
+#[derive(Debug, Args)]
+pub struct LutArgs {
+    #[command(subcommand)]
+    pub command: LutCommand,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum LutCommand {
+    /// Build a table (or one shard of it) with the finite-element solver; prints per-curve
+    /// timings on stderr.
+    Build(BuildArgs),
+    /// Join shard files into one table (identical to a single-process build).
+    Merge(MergeArgs),
+    /// Describe a table file: axes, parameters, version, hash, size.
+    Info(InfoArgs),
+}
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
+pub enum GridName {
+    /// E2 10–1000 kPa (13 log-spaced), p_air 0, 6, 10, 15, 20, 30 kPa, production settings.
+    Default,
+    /// 3 x 2 curves on a coarse mesh: a smoke test of the pipeline, not for fitting.
+    Tiny,
+}
+
+#[derive(Debug, Args)]
+pub struct BuildArgs {
+    /// Output file (default: <grid>.lut, or <grid>.shard-K-of-N.lut with --shard).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Build only shard K of N (zero-based K: curves with index % N == K).
+    #[arg(long, value_name = "K/N")]
+    pub shard: Option<String>,
+    /// Which grid to build.
+    #[arg(long, value_enum, default_value = "default")]
+    pub grid: GridName,
+    /// Override the grid's mesh level (0 = production; negative = coarser).
+    #[arg(long, allow_negative_numbers = true)]
+    pub mesh_level: Option<i32>,
+    /// Override the grid's number of load steps per curve.
+    #[arg(long)]
+    pub steps: Option<usize>,
+}
+
+#[derive(Debug, Args)]
+pub struct MergeArgs {
+    /// Shard files (every shard K/N of one build, in any order).
+    #[arg(required = true)]
+    pub shards: Vec<PathBuf>,
+    /// Output table file.
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+#[derive(Debug, Args)]
+pub struct InfoArgs {
+    /// A table or shard file.
+    pub file: PathBuf,
+    /// Print the header as JSON (plus file size and hash) instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(args: LutArgs) -> ExitCode {
+    match args.command {
+        LutCommand::Build(a) => build(a),
+        LutCommand::Merge(a) => merge(a),
+        LutCommand::Info(a) => info(a),
+    }
+}
+
+/// Bad input (arguments, unreadable or invalid files) exits with 2.
+fn bad_input(e: impl std::fmt::Display) -> ExitCode {
+    eprintln!("error: {e}");
+    ExitCode::from(2)
+}
+
+fn build(a: BuildArgs) -> ExitCode {
+    let mut grid = match a.grid {
+        GridName::Default => LutGrid::default_grid(),
+        GridName::Tiny => LutGrid::tiny_grid(),
+    };
+    if let Some(level) = a.mesh_level {
+        grid.base.mesh_level = level;
+    }
+    if let Some(steps) = a.steps {
+        grid.base.steps = steps;
+    }
+    if let Err(e) = grid.validate() {
+        return bad_input(e);
+    }
+    // validate the base point with the solver's own checks before spending any time
+    if let Err(e) = fem_core::problem::validate(&grid.curve_params(0)) {
+        return bad_input(e);
+    }
+    let shard = match a.shard.as_deref().map(Shard::parse).transpose() {
+        Ok(s) => s,
+        Err(e) => return bad_input(e),
+    };
+    let out = a.out.unwrap_or_else(|| match shard {
+        Some(s) => PathBuf::from(format!(
+            "{}.shard-{}-of-{}.lut",
+            grid.name, s.index, s.count
+        )),
+        None => PathBuf::from(format!("{}.lut", grid.name)),
+    });
+    let todo = (0..grid.curve_count())
+        .filter(|&i| shard.is_none_or(|s| s.contains(i)))
+        .count();
+    eprintln!(
+        "building {} curve(s) of grid {:?}{} (mesh level {}, {} steps to h = {} mm) on {} thread(s)",
+        todo,
+        grid.name,
+        shard.map(|s| format!(", shard {s}")).unwrap_or_default(),
+        grid.base.mesh_level,
+        grid.base.steps,
+        grid.base.max_depth_mm,
+        rayon_threads(),
+    );
+    let done = AtomicUsize::new(0);
+    let report = |r: &CurveReport| {
+        let k = done.fetch_add(1, Ordering::Relaxed) + 1;
+        match &r.failure {
+            None => eprintln!(
+                "[{k:>4}/{todo}] curve {:>4}  {:<34} {:>8.2} s",
+                r.index, r.what, r.seconds
+            ),
+            Some(f) => eprintln!(
+                "[{k:>4}/{todo}] curve {:>4}  {:<34} {:>8.2} s  FAILED: {f}",
+                r.index, r.what, r.seconds
+            ),
+        }
+    };
+    let start = Instant::now();
+    let description = fem_solver_description(grid.base.mesh_level);
+    let lut = match build_lut(&grid, shard, &fem_core::solve_curve, &description, &report) {
+        Ok(l) => l,
+        Err(e) => return bad_input(e),
+    };
+    let wall = start.elapsed().as_secs_f64();
+    let hash = match write_lut(&out, &lut) {
+        Ok(h) => h,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    let size = std::fs::metadata(&out).map(|m| m.len()).unwrap_or(0);
+    let failed = lut.failures().count();
+    eprintln!(
+        "wrote {} ({size} bytes, sha256:{hash}): {} curve(s) in {wall:.1} s wall",
+        out.display(),
+        lut.curves.len()
+    );
+    if failed > 0 {
+        eprintln!("error: {failed} curve(s) failed; they are recorded as failed in the file");
+        return ExitCode::FAILURE;
+    }
+    ExitCode::SUCCESS
+}
+
+fn rayon_threads() -> usize {
+    std::env::var("RAYON_NUM_THREADS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .filter(|&n: &usize| n > 0)
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+}
+
+fn merge(a: MergeArgs) -> ExitCode {
+    let mut shards = Vec::with_capacity(a.shards.len());
+    for path in &a.shards {
+        match read_lut(path) {
+            Ok(f) => shards.push((path.display().to_string(), f.lut)),
+            Err(e) => return bad_input(e),
+        }
+    }
+    let merged = match merge_shards(&shards) {
+        Ok(m) => m,
+        Err(e) => return bad_input(e),
+    };
+    match write_lut(&a.out, &merged) {
+        Ok(hash) => {
+            eprintln!(
+                "merged {} shard(s), {} curves, into {} (sha256:{hash})",
+                shards.len(),
+                merged.curves.len(),
+                a.out.display()
+            );
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn info(a: InfoArgs) -> ExitCode {
+    let file = match read_lut(&a.file) {
+        Ok(x) => x,
+        Err(e) => return bad_input(e),
+    };
+    if a.json {
+        let v = serde_json::json!({
+            "file": a.file.display().to_string(),
+            "size_bytes": file.size_bytes,
+            "sha256": file.sha256,
+            "header": file.header,
+        });
+        println!("{v}");
+        return ExitCode::SUCCESS;
+    }
+    print!("{}", describe(&a.file, &file));
+    ExitCode::SUCCESS
+}
+
+fn axis(v: &[f64]) -> String {
+    v.iter()
+        .map(|x| x.to_string())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+fn describe(path: &Path, file: &LutFile) -> String {
+    let (lut, h) = (&file.lut, &file.header);
+    let g = &lut.grid;
+    let mut s = String::new();
+    let mut line = |t: String| {
+        s += &t;
+        s.push('\n');
+    };
+    line(format!(
+        "file:          {} ({} bytes)",
+        path.display(),
+        file.size_bytes
+    ));
+    line(format!(
+        "format:        {} version {}, built by fem-core {}",
+        h.format, h.format_version, h.fem_core_version
+    ));
+    line(format!("sha256:        {}", file.sha256));
+    line(format!(
+        "grid:          {:?}, {} curves{}",
+        g.name,
+        g.curve_count(),
+        lut.shard
+            .map(|s| format!(" (this shard {s} holds {})", lut.curves.len()))
+            .unwrap_or_default()
+    ));
+    line(format!(
+        "E2 [kPa] ({}):  {}",
+        g.modulus_kpa.len(),
+        axis(&g.modulus_kpa)
+    ));
+    line(format!(
+        "p_air [kPa] ({}): {}",
+        g.pressure_kpa.len(),
+        axis(&g.pressure_kpa)
+    ));
+    line(format!(
+        "thickness [mm]: {}",
+        axis(&g.effects.sample_thickness_mm)
+    ));
+    line(format!("friction:      {}", axis(&g.effects.friction)));
+    line(format!("material:      {:?}", g.effects.material));
+    line(format!(
+        "base:          {}",
+        serde_json::to_string(&g.base).unwrap_or_default()
+    ));
+    line(format!("mesh level:    {}", h.mesh.mesh_level));
+    line(format!("solver:        {}", h.mesh.solver));
+    let ok: Vec<_> = lut.curves.iter().filter(|c| c.failure.is_none()).collect();
+    if let (Some(min), Some(max)) = (
+        ok.iter().map(|c| c.len()).min(),
+        ok.iter().map(|c| c.len()).max(),
+    ) {
+        line(format!("points/curve:  {min}..{max}"));
+    }
+    let u_max = ok
+        .iter()
+        .filter_map(|c| c.u_s_mm.last().copied())
+        .fold(f64::NAN, f64::max);
+    let a_max = ok
+        .iter()
+        .flat_map(|c| c.a_mm.iter().copied())
+        .fold(f64::NAN, f64::max);
+    line(format!("max u_s:       {u_max} mm, max a: {a_max} mm"));
+    let failures: Vec<_> = lut.failures().collect();
+    line(format!("failed curves: {}", failures.len()));
+    for c in failures {
+        line(format!(
+            "  curve {} ({}): {}",
+            c.index,
+            g.describe(c.index),
+            c.failure.as_deref().unwrap_or("")
+        ));
+    }
+    s
+}
