@@ -130,17 +130,22 @@ impl<T: PicobootTransport> Picoboot<T> {
             .control_out(REQTYPE_OUT, REQ_INTERFACE_RESET, &[])
     }
 
-    fn status(&mut self, cmd: u8) -> PicobootError {
+    /// After a failed transfer: the device's status code if it reports one, else the USB
+    /// error itself.
+    fn failure(&mut self, cmd: u8, usb_error: PicobootError) -> PicobootError {
         match self
             .transport
             .control_in(REQTYPE_IN, REQ_GET_COMMAND_STATUS, 16)
         {
-            Ok(s) if s.len() >= 8 => PicobootError::Command {
-                cmd,
-                status: u32::from_le_bytes([s[4], s[5], s[6], s[7]]),
-            },
-            Ok(_) => PicobootError::Command { cmd, status: 8 },
-            Err(e) => e,
+            Ok(s) if s.len() >= 8 => {
+                let status = u32::from_le_bytes([s[4], s[5], s[6], s[7]]);
+                if status != 0 {
+                    PicobootError::Command { cmd, status }
+                } else {
+                    usb_error
+                }
+            }
+            _ => usb_error,
         }
     }
 
@@ -156,7 +161,10 @@ impl<T: PicobootTransport> Picoboot<T> {
         let transfer = if is_in { in_len } else { out_data.len() };
         let packet = command_packet(self.token, cmd, args, transfer as u32);
         self.token = self.token.wrapping_add(1);
-        let sent = self.transport.bulk_out(&packet)?;
+        let sent = match self.transport.bulk_out(&packet) {
+            Ok(n) => n,
+            Err(e) => return Err(self.failure(cmd, e)),
+        };
         if sent != packet.len() {
             return Err(PicobootError::Short {
                 cmd,
@@ -169,7 +177,7 @@ impl<T: PicobootTransport> Picoboot<T> {
             while data.len() < in_len {
                 let chunk = match self.transport.bulk_in(in_len - data.len()) {
                     Ok(c) => c,
-                    Err(_) => return Err(self.status(cmd)),
+                    Err(e) => return Err(self.failure(cmd, e)),
                 };
                 if chunk.is_empty() {
                     break;
@@ -184,8 +192,8 @@ impl<T: PicobootTransport> Picoboot<T> {
                 });
             }
             // Acknowledge with a zero-length OUT.
-            if self.transport.bulk_out(&[]).is_err() {
-                return Err(self.status(cmd));
+            if let Err(e) = self.transport.bulk_out(&[]) {
+                return Err(self.failure(cmd, e));
             }
         } else {
             if !out_data.is_empty() {
@@ -198,12 +206,12 @@ impl<T: PicobootTransport> Picoboot<T> {
                             want: out_data.len(),
                         });
                     }
-                    Err(_) => return Err(self.status(cmd)),
+                    Err(e) => return Err(self.failure(cmd, e)),
                 }
             }
             // Acknowledge with a zero-length IN.
-            if self.transport.bulk_in(0).is_err() {
-                return Err(self.status(cmd));
+            if let Err(e) = self.transport.bulk_in(0) {
+                return Err(self.failure(cmd, e));
             }
         }
         Ok(data)

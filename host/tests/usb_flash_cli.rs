@@ -1,0 +1,74 @@
+//! `tactile flash FIRMWARE.elf --uf2-out FILE`: the UF2 written for a minimal ELF.
+
+#![allow(clippy::unwrap_used)] // tests may unwrap (COMMON.md)
+
+use host::usb::uf2::{crc32_mpeg2, parse_uf2};
+use std::process::Command;
+
+/// ELF32 LE ARM with one PT_LOAD of `data` at physical address `paddr`.
+fn one_segment_elf(paddr: u32, data: &[u8]) -> Vec<u8> {
+    let mut out = vec![0u8; 52 + 32];
+    out[..7].copy_from_slice(b"\x7fELF\x01\x01\x01");
+    out[18..20].copy_from_slice(&40u16.to_le_bytes());
+    out[28..32].copy_from_slice(&52u32.to_le_bytes());
+    out[42..44].copy_from_slice(&32u16.to_le_bytes());
+    out[44..46].copy_from_slice(&1u16.to_le_bytes());
+    let words = [
+        1u32,
+        84,
+        paddr,
+        paddr,
+        data.len() as u32,
+        data.len() as u32,
+        5,
+        4,
+    ];
+    for (k, w) in words.iter().enumerate() {
+        out[52 + 4 * k..56 + 4 * k].copy_from_slice(&w.to_le_bytes());
+    }
+    out.extend_from_slice(data);
+    out
+}
+
+#[test]
+fn uf2_out_writes_the_image_and_warns_without_boot2() {
+    let dir = std::env::temp_dir().join(format!("usb_flash_cli_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    // With a valid boot2: no warning.
+    let mut data: Vec<u8> = (0..252u32).map(|i| i as u8).collect();
+    let crc = crc32_mpeg2(&data);
+    data.extend_from_slice(&crc.to_le_bytes());
+    data.extend((0..1000u32).map(|i| (i % 7) as u8));
+    std::fs::write(dir.join("fw.elf"), one_segment_elf(0x1000_0000, &data)).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_tactile"))
+        .arg("flash")
+        .arg(dir.join("fw.elf"))
+        .arg("--uf2-out")
+        .arg(dir.join("fw.uf2"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(!String::from_utf8_lossy(&out.stderr).contains("warning"));
+    let blocks = parse_uf2(&std::fs::read(dir.join("fw.uf2")).unwrap()).unwrap();
+    assert_eq!(blocks.len(), 5); // 1256 bytes -> 5 pages
+    assert_eq!(&blocks[0].payload[..], &data[..256]);
+    // Without boot2: written, with a warning.
+    std::fs::write(
+        dir.join("app.elf"),
+        one_segment_elf(0x1000_0100, &[1, 2, 3]),
+    )
+    .unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_tactile"))
+        .arg("flash")
+        .arg(dir.join("app.elf"))
+        .arg("--uf2-out")
+        .arg(dir.join("app.uf2"))
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("no valid boot2"));
+}
