@@ -10,7 +10,7 @@
 
 use faer::linalg::solvers::Solve;
 use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
-use faer::sparse::{Argsort, Pair, SparseColMat, SymbolicSparseColMat, Triplet};
+use faer::sparse::{Pair, SparseColMat, SymbolicSparseColMat, Triplet};
 use faer::{Mat, Side};
 
 use crate::FemError;
@@ -41,10 +41,7 @@ impl UpperTriplets {
 }
 
 struct CachedStructure {
-    rows: Vec<u32>,
-    cols: Vec<u32>,
     symbolic: SymbolicSparseColMat<usize>,
-    argsort: Argsort<usize>,
     llt: SymbolicLlt<usize>,
 }
 
@@ -69,39 +66,63 @@ fn solver_error(what: &str, e: impl std::fmt::Debug) -> FemError {
     FemError::LinearSolver(format!("{what}: {e:?}"))
 }
 
+/// Scatter the triplets into the values of `symbolic` (upper CSC); `None` if an entry is
+/// not in the pattern.
+fn fill_values(symbolic: &SymbolicSparseColMat<usize>, t: &UpperTriplets) -> Option<Vec<f64>> {
+    let col_ptr = symbolic.col_ptr();
+    let row_idx = symbolic.row_idx();
+    let mut values = vec![0.0; row_idx.len()];
+    for ((&r, &c), &v) in t.rows.iter().zip(&t.cols).zip(&t.values) {
+        let (r, c) = (r as usize, c as usize);
+        let range = col_ptr[c]..col_ptr[c + 1];
+        let k = row_idx[range.clone()].binary_search(&r).ok()?;
+        values[range.start + k] += v;
+    }
+    Some(values)
+}
+
 impl SymmetricSolver {
     /// Solve `K x = rhs` for the symmetric matrix of dimension `n` given by `t`.
+    ///
+    /// The sparsity pattern only grows: when new entries appear (new contact pairs), the
+    /// pattern becomes the union of the old one and the new entries, so that after the
+    /// contact zone has been swept the symbolic factorisation is no longer repeated.
     pub fn solve(&mut self, n: usize, t: &UpperTriplets, rhs: &[f64]) -> Result<Vec<f64>, FemError> {
-        let reuse = self
+        let mut values = self
             .cache
             .as_ref()
-            .is_some_and(|c| c.rows == t.rows && c.cols == t.cols);
-        if !reuse {
-            let pairs: Vec<Pair<usize, usize>> = t
+            .filter(|c| c.symbolic.nrows() == n)
+            .and_then(|c| fill_values(&c.symbolic, t));
+        if values.is_none() {
+            let mut pairs: Vec<Pair<usize, usize>> = t
                 .rows
                 .iter()
                 .zip(&t.cols)
                 .map(|(&r, &c)| Pair::new(r as usize, c as usize))
                 .collect();
-            let (symbolic, argsort) = SymbolicSparseColMat::try_new_from_indices(n, n, &pairs)
+            if let Some(old) = self.cache.as_ref().filter(|c| c.symbolic.nrows() == n) {
+                let col_ptr = old.symbolic.col_ptr();
+                let row_idx = old.symbolic.row_idx();
+                for c in 0..n {
+                    for &r in &row_idx[col_ptr[c]..col_ptr[c + 1]] {
+                        pairs.push(Pair::new(r, c));
+                    }
+                }
+            }
+            let (symbolic, _) = SymbolicSparseColMat::try_new_from_indices(n, n, &pairs)
                 .map_err(|e| solver_error("sparsity pattern", e))?;
             let llt = SymbolicLlt::try_new(symbolic.as_ref(), Side::Upper)
                 .map_err(|e| solver_error("symbolic Cholesky", e))?;
             self.symbolic_analyses += 1;
-            self.cache = Some(CachedStructure {
-                rows: t.rows.clone(),
-                cols: t.cols.clone(),
-                symbolic,
-                argsort,
-                llt,
-            });
+            values = fill_values(&symbolic, t);
+            self.cache = Some(CachedStructure { symbolic, llt });
         }
         let cache = self
             .cache
             .as_ref()
             .ok_or_else(|| FemError::LinearSolver("no cached structure".into()))?;
-        let matrix = SparseColMat::new_from_argsort(cache.symbolic.clone(), &cache.argsort, &t.values)
-            .map_err(|e| solver_error("matrix values", e))?;
+        let values = values.ok_or_else(|| FemError::LinearSolver("pattern mismatch".into()))?;
+        let matrix = SparseColMat::new(cache.symbolic.clone(), values);
         let mut x = Mat::<f64>::from_fn(n, 1, |i, _| rhs[i]);
         match Llt::try_new_with_symbolic(cache.llt.clone(), matrix.as_ref(), Side::Upper) {
             Ok(llt) => llt.solve_in_place(x.as_mut()),

@@ -87,6 +87,9 @@ pub struct Model {
     solver: SymmetricSolver,
     /// Total Newton iterations performed (diagnostic).
     pub newton_iterations: usize,
+    /// CPU time spent in assembly and in the linear solver (diagnostic).
+    pub assembly_seconds: f64,
+    pub solve_seconds: f64,
 }
 
 impl Model {
@@ -104,6 +107,8 @@ impl Model {
             newton: NewtonSettings::default(),
             solver: SymmetricSolver::default(),
             newton_iterations: 0,
+            assembly_seconds: 0.0,
+            solve_seconds: 0.0,
         };
         model.renumber();
         model
@@ -111,6 +116,11 @@ impl Model {
 
     pub fn n_dofs(&self) -> usize {
         self.equation.len()
+    }
+
+    /// Number of symbolic factorisations performed (diagnostic).
+    pub fn solver_symbolic_analyses(&self) -> usize {
+        self.solver.symbolic_analyses
     }
 
     pub fn n_equations(&self) -> usize {
@@ -309,7 +319,10 @@ impl Model {
         let mut last_step: Option<(f64, Vec<f64>)> = None;
         let mut backtracks = 0;
         for it in 0..self.newton.max_iterations {
-            let asm = match self.assemble(u, p_kpa, true) {
+            let t0 = std::time::Instant::now();
+            let assembled = self.assemble(u, p_kpa, true);
+            self.assembly_seconds += t0.elapsed().as_secs_f64();
+            let asm = match assembled {
                 Some(a) if a.min_jacobian > 0.0 && a.min_jacobian.is_finite() => a,
                 _ => {
                     // an element inverted: halve the last correction (up to 6 times)
@@ -366,10 +379,12 @@ impl Model {
             }
             backtracks = 0;
             let rhs: Vec<f64> = r.iter().map(|x| -x).collect();
+            let t0 = std::time::Instant::now();
             let mut du = self
                 .solver
                 .solve(self.n_equations, &asm.tangent, &rhs)
                 .map_err(NewtonFailure::Linear)?;
+            self.solve_seconds += t0.elapsed().as_secs_f64();
             let longest = du.iter().fold(0.0, |m: f64, x| m.max(x.abs()));
             if longest > self.newton.max_correction_mm {
                 let scale = self.newton.max_correction_mm / longest;

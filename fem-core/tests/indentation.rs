@@ -57,7 +57,7 @@ fn hertz_rigid_sphere_on_a_deep_half_space() {
     // E2 = 200 kPa, nu = 0.499, R = 5 mm: at delta = 0.1 mm a = 0.7071 mm, F = 25.11 mN.
     let (a_h, f_h) = hertz(200.0, 0.499, 5.0, 0.1);
     assert!((a_h - 0.7071).abs() < 1e-4 && (f_h - 25.11).abs() < 0.01);
-    let pts = rigid_sphere(200.0, 100.0, 100.0, 0.1, 2, 0);
+    let pts = rigid_sphere(200.0, 100.0, 100.0, 0.1, 2, 1);
     let (delta, a, f) = pts[pts.len() - 1];
     println!("Hertz delta {delta}: a = {a:.4} mm (0.7071), F = {f:.3} mN (25.11)");
     // coarse default mesh (0.1 mm elements, ~7 across the contact): a is located between
@@ -70,7 +70,7 @@ fn hertz_rigid_sphere_on_a_deep_half_space() {
 #[test]
 #[ignore = "fine mesh, run in release: cargo test -p fem-core --release -- --ignored"]
 fn sneddon_rigid_sphere_at_large_depth_fine() {
-    let pts = rigid_sphere(200.0, 100.0, 100.0, 1.0, 10, 1);
+    let pts = rigid_sphere(200.0, 100.0, 100.0, 1.0, 10, 2);
     for &(delta, a, f) in pts.iter().skip(1) {
         // invert Sneddon's delta(a) by bisection
         let (mut lo, mut hi) = (1e-6, 4.999);
@@ -96,7 +96,7 @@ fn sneddon_rigid_sphere_at_large_depth_fine() {
 fn sneddon_rigid_sphere_at_large_depth() {
     // delta = 0.6 mm: a/R ~ 0.35, where Hertz already overestimates the load; Sneddon's
     // exact sphere solution (same linear half-space theory) is the reference.
-    let pts = rigid_sphere(200.0, 100.0, 100.0, 0.6, 4, -1);
+    let pts = rigid_sphere(200.0, 100.0, 100.0, 0.6, 4, 0);
     let (delta, a, f) = pts[pts.len() - 1];
     let (mut lo, mut hi) = (1e-6, 4.999);
     for _ in 0..100 {
@@ -121,7 +121,7 @@ fn dimitriadis_thin_bonded_layer() {
     // validity range of Dimitriadis et al. (2002) eq. for bonded, incompressible samples:
     // F = F_Hertz (1 + 1.133x + 1.283x^2 + 0.769x^3 + 0.0975x^4).
     let h_layer = 2.0;
-    let pts = rigid_sphere(200.0, 30.0, h_layer, 0.1, 2, 0);
+    let pts = rigid_sphere(200.0, 30.0, h_layer, 0.1, 2, 1);
     let (delta, _, f) = pts[pts.len() - 1];
     let x = (5.0f64 * delta).sqrt() / h_layer;
     let corr = 1.0 + 1.133 * x + 1.283 * x * x + 0.769 * x.powi(3) + 0.0975 * x.powi(4);
