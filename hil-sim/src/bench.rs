@@ -77,7 +77,8 @@ impl BenchHandle {
         &self.pty_path
     }
 
-    /// The wall-clock instant of simulated time 0, once the bench runs in real time.
+    /// The wall-clock instant of simulated time 0, once the bench runs in real time (`None`
+    /// before, or if the simulation ran ahead further than the monotonic clock reaches back).
     pub fn epoch(&self) -> Option<Instant> {
         self.epoch.lock().ok().and_then(|e| *e)
     }
@@ -155,7 +156,9 @@ fn serve(
     epoch: &Mutex<Option<Instant>>,
 ) {
     let mut real_time = options.pacing == Pacing::RealTime;
+    // Real time: simulated time = anchor_sim_s + anchor.elapsed().
     let mut anchor = Instant::now();
+    let mut anchor_sim_s = 0.0f64;
     if real_time && let Ok(mut e) = epoch.lock() {
         *e = Some(anchor);
     }
@@ -169,9 +172,11 @@ fn serve(
                 if !real_time && options.pacing == Pacing::Auto {
                     // A host attached: from now on simulated time follows the wall clock.
                     real_time = true;
-                    anchor = Instant::now() - Duration::from_secs_f64(device.time_s());
+                    anchor = Instant::now();
+                    anchor_sim_s = device.time_s();
                     if let Ok(mut e) = epoch.lock() {
-                        *e = Some(anchor);
+                        // None if the monotonic clock started less than that long ago.
+                        *e = anchor.checked_sub(Duration::from_secs_f64(anchor_sim_s.max(0.0)));
                     }
                     device.set_camera_enabled(options.camera);
                 }
@@ -189,7 +194,7 @@ fn serve(
         }
         // Simulate.
         if real_time {
-            let wall = anchor.elapsed().as_secs_f64();
+            let wall = anchor_sim_s + anchor.elapsed().as_secs_f64();
             let mut ticks = 0;
             while device.next_tick_s() <= wall && ticks < 200 {
                 device.step();

@@ -170,6 +170,11 @@ pub struct CameraRenderer {
     edge: Vec<f32>,
     /// 256 equiprobable standard-normal levels.
     noise_levels: [f32; 256],
+    /// Cached contact-free frame and the (LED, mirror) it was made for.
+    background: Vec<f32>,
+    background_key: Option<(u32, bool)>,
+    /// Scratch image.
+    work: Vec<f32>,
 }
 
 impl CameraRenderer {
@@ -210,6 +215,9 @@ impl CameraRenderer {
             mirror_cover,
             edge,
             noise_levels,
+            background: Vec::new(),
+            background_key: None,
+            work: Vec::new(),
         }
     }
 
@@ -237,75 +245,101 @@ impl CameraRenderer {
         self.edge[i] + f * (self.edge[i + 1] - self.edge[i])
     }
 
+    /// The frame without contact for this LED drive and mirror setting (cached).
+    fn background(&mut self, led: f32, mirror: bool) -> &[f32] {
+        let key = (led.to_bits(), mirror);
+        if self.background_key != Some(key) {
+            let dark = self.cfg.dark_level as f32;
+            let mirror_level = self.cfg.mirror_level as f32;
+            let on = if mirror { 1.0f32 } else { 0.0 };
+            self.background = self
+                .shell_gain
+                .iter()
+                .zip(&self.mirror_cover)
+                .map(|(&g, &m)| {
+                    let m = on * m;
+                    dark + led * ((1.0 - m) * g + m * mirror_level)
+                })
+                .collect();
+            self.background_key = Some(key);
+        }
+        &self.background
+    }
+
     /// Renders one GRAY8 image into `out` (resized to width * height).
-    pub fn render_gray(&self, scene: &FrameScene, rng: &mut SimRng, out: &mut Vec<u8>) {
+    pub fn render_gray(&mut self, scene: &FrameScene, rng: &mut SimRng, out: &mut Vec<u8>) {
         let (w, h) = (self.cfg.width, self.cfg.height);
-        out.resize(w * h, 0);
+        let n = w * h;
         let led = scene.led.clamp(0.0, 1.0) as f32;
-        let dark = self.cfg.dark_level as f32;
-        let k = self.cfg.contact_contrast as f32;
-        let sigma_n = if scene.noise {
-            self.cfg.noise_levels as f32
-        } else {
-            0.0
-        };
-        let mirror_on = if scene.mirror { 1.0f32 } else { 0.0 };
-        let mirror_level = self.cfg.mirror_level as f32;
-        let sigma = self.cfg.blur_sigma_px.max(1e-6);
-        let r = scene.radius_px.max(0.0);
-        let q = scene.axis_ratio.clamp(1e-3, 1.0);
-        let (sin, cos) = scene.axis_angle_rad.sin_cos();
-        // Rows and columns the disc (out to its blurred tail) can touch.
-        let reach = r + EDGE_HALF_WIDTH_SIGMAS * sigma + 1.0;
-        let (y0, y1) = if r > 0.0 {
-            (
-                ((self.cy - reach).floor().max(0.0)) as usize,
-                ((self.cy + reach).ceil().min(h as f64)) as usize,
-            )
-        } else {
-            (0, 0)
-        };
-        let (x0, x1) = (
-            ((self.cx - reach).floor().max(0.0)) as usize,
-            ((self.cx + reach).ceil().min(w as f64)) as usize,
-        );
-        let mut bits = 0u64;
-        let mut nbits = 0u32;
-        for y in 0..h {
-            let row = y * w;
-            let in_rows = y >= y0 && y < y1;
-            for x in 0..w {
-                let i = row + x;
-                let mut shell = self.shell_gain[i];
-                if in_rows && x >= x0 && x < x1 {
-                    let dx = x as f64 + 0.5 - self.cx;
-                    let dy = y as f64 + 0.5 - self.cy;
-                    // Coordinates along the major and minor axes.
-                    let u = dx * cos + dy * sin;
-                    let v = -dx * sin + dy * cos;
-                    let rho = (u * u + (v / q) * (v / q)).sqrt();
-                    let d = self.edge_at((rho - r) / sigma);
-                    shell *= 1.0 + k * d;
-                }
-                let m = mirror_on * self.mirror_cover[i];
-                let mut value = dark + led * ((1.0 - m) * shell + m * mirror_level);
-                if sigma_n > 0.0 {
-                    if nbits == 0 {
-                        bits = rng.next_u64();
-                        nbits = 8;
-                    }
-                    value += sigma_n * self.noise_levels[(bits & 0xff) as usize];
+        let mut work = std::mem::take(&mut self.work);
+        work.clear();
+        work.extend_from_slice(self.background(led, scene.mirror));
+        // Read noise, eight table deviates per 64 random bits.
+        if scene.noise && self.cfg.noise_levels > 0.0 {
+            let sigma_n = self.cfg.noise_levels as f32;
+            let table: [f32; 256] = std::array::from_fn(|i| sigma_n * self.noise_levels[i]);
+            let mut chunks = work.chunks_exact_mut(8);
+            for chunk in &mut chunks {
+                let mut bits = rng.next_u64();
+                for v in chunk {
+                    *v += table[(bits & 0xff) as usize];
                     bits >>= 8;
-                    nbits -= 1;
                 }
-                // Rounded and clipped to the 8-bit range.
-                out[i] = (value + 0.5).clamp(0.0, 255.0) as u8;
+            }
+            let mut bits = rng.next_u64();
+            for v in chunks.into_remainder() {
+                *v += table[(bits & 0xff) as usize];
+                bits >>= 8;
             }
         }
+        // The contact: adds led (1 - m) g k D inside the disc's reach.
+        let r = scene.radius_px.max(0.0);
+        if r > 0.0 {
+            let k = self.cfg.contact_contrast as f32;
+            let on = if scene.mirror { 1.0f32 } else { 0.0 };
+            let sigma = self.cfg.blur_sigma_px.max(1e-6);
+            let q = scene.axis_ratio.clamp(1e-3, 1.0);
+            let (sin, cos) = scene.axis_angle_rad.sin_cos();
+            // rho >= dist (q <= 1): beyond `reach` D vanishes; rho <= dist / q: inside
+            // `inner` D is 1 (to the table's 6-sigma tail, < 1e-9).
+            let reach = r + EDGE_HALF_WIDTH_SIGMAS * sigma + 1.0;
+            let inner = q * (r - EDGE_HALF_WIDTH_SIGMAS * sigma - 1.0);
+            let y0 = (self.cy - reach).floor().max(0.0) as usize;
+            let y1 = ((self.cy + reach).ceil().max(0.0) as usize).min(h);
+            for y in y0..y1 {
+                let dy = y as f64 + 0.5 - self.cy;
+                let half = (reach * reach - dy * dy).max(0.0).sqrt();
+                let x0 = (self.cx - half).floor().max(0.0) as usize;
+                let x1 = ((self.cx + half).ceil().max(0.0) as usize).min(w);
+                let inner_half = if inner > dy.abs() {
+                    (inner * inner - dy * dy).sqrt()
+                } else {
+                    -1.0
+                };
+                for x in x0..x1 {
+                    let i = y * w + x;
+                    let dx = x as f64 + 0.5 - self.cx;
+                    let d = if dx.abs() < inner_half {
+                        1.0
+                    } else {
+                        // Coordinates along the major and minor axes.
+                        let u = dx * cos + dy * sin;
+                        let v = (-dx * sin + dy * cos) / q;
+                        self.edge_at(((u * u + v * v).sqrt() - r) / sigma)
+                    };
+                    let m = on * self.mirror_cover[i];
+                    work[i] += led * (1.0 - m) * self.shell_gain[i] * k * d;
+                }
+            }
+        }
+        out.clear();
+        out.extend(work.iter().map(|&v| to_level(v)));
+        debug_assert_eq!(out.len(), n);
+        self.work = work;
     }
 
     /// Renders one frame in the configured format.
-    pub fn render(&self, scene: &FrameScene, rng: &mut SimRng) -> Vec<u8> {
+    pub fn render(&mut self, scene: &FrameScene, rng: &mut SimRng) -> Vec<u8> {
         let mut gray = Vec::new();
         self.render_gray(scene, rng, &mut gray);
         match self.cfg.format {
@@ -313,6 +347,12 @@ impl CameraRenderer {
             PixelFormat::Yuyv => gray_to_yuyv(&gray),
         }
     }
+}
+
+/// Rounds and clips an intensity to an 8-bit level.
+fn to_level(value: f32) -> u8 {
+    // In 0..=255 after the clamp; `as` truncates the +0.5-shifted value: rounding.
+    (value + 0.5).clamp(0.0, 255.0) as u8
 }
 
 /// Packs a grey image as YUYV with neutral chroma.

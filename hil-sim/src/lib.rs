@@ -4,7 +4,16 @@
 //! [`mechanics`] (stage travel and the contact from fem-core curves or a rigid sample),
 //! [`sensors`] (ADC, proximity, manometer, HX711 load cell, MCU clock), [`camera`] (frame
 //! renderer), [`effects`] (hidden effects in the ground truth), [`faults`] (injected
-//! faults), [`rng`] (seeded noise); [`scenario`] reads all of it from a TOML file.
+//! faults), [`rng`] (seeded noise); [`scenario`] reads all of it from a TOML file and
+//! [`mechanics_source`] builds the contact mechanics it names (fem-core LUT, curve files,
+//! direct solves, or the rigid sample).
+//!
+//! The device: [`device::SimDevice`] runs the `firmware` library's `Controller` against all of
+//! the above in simulated time (deterministic for a seed; usable directly, e.g. in tests, with
+//! [`device::SimDevice::host_write`] / [`device::SimDevice::take_tx_until`]);
+//! [`bench::start`] serves it on a pseudo-terminal from its own thread and hands camera
+//! frames out through an `mpsc::Receiver<SimFrame>` (the frame-source interface). The
+//! `hil-sim` binary does the same from the command line.
 
 pub mod bench;
 pub mod camera;

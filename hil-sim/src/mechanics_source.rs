@@ -51,48 +51,55 @@ pub fn build_mechanics(
             Box::new(CurveMechanics::new(&curves)?)
         }
         MechanicsSource::Lut { path } => {
-            let (lut, _header) = read_lut(path).map_err(|source| MechanicsSourceError::Lut {
+            let file = read_lut(path).map_err(|source| MechanicsSourceError::Lut {
                 path: path.clone(),
                 source,
             })?;
-            let curves = lut_curves_for_sample(&lut, &scenario.sample);
+            let curves = lut_curves_for_sample(&file.lut, &scenario.sample);
             Box::new(CurveMechanics::new(&curves)?)
         }
-        MechanicsSource::Solve {
-            pressures_kpa,
-            modulus_factors,
-            mesh_level,
-            steps,
-            max_depth_mm,
-        } => {
-            let mut curves = Vec::new();
-            for &factor in modulus_factors {
-                for &p in pressures_kpa {
-                    let params = CurveParams {
-                        sample_modulus_kpa: scenario.sample.modulus_kpa * factor,
-                        pressure_kpa: p,
-                        max_depth_mm: *max_depth_mm,
-                        steps: *steps,
-                        mesh_level: *mesh_level,
-                        ..sample_params(&scenario.sample)
-                    };
-                    let curve = fem_core::solve_curve(&params).map_err(|source| {
-                        MechanicsSourceError::Solve {
-                            modulus_kpa: params.sample_modulus_kpa,
-                            pressure_kpa: p,
-                            source,
-                        }
-                    })?;
-                    curves.push(curve);
-                }
-            }
-            Box::new(CurveMechanics::new(&curves)?)
-        }
+        MechanicsSource::Solve { .. } => Box::new(CurveMechanics::new(&solve_curves(scenario)?)?),
     };
     if scenario.effects.needs_modulus_axis() && !model.has_modulus_axis() {
         return Err(MechanicsSourceError::NeedsModulusAxis);
     }
     Ok(model)
+}
+
+/// The fem-core solves a `solve` mechanics source asks for (empty for other sources), in
+/// modulus-major order. They can be saved as JSON and used as a `curves` source.
+pub fn solve_curves(scenario: &Scenario) -> Result<Vec<Curve>, MechanicsSourceError> {
+    let MechanicsSource::Solve {
+        pressures_kpa,
+        modulus_factors,
+        mesh_level,
+        steps,
+        max_depth_mm,
+    } = &scenario.mechanics
+    else {
+        return Ok(Vec::new());
+    };
+    let mut curves = Vec::new();
+    for &factor in modulus_factors {
+        for &p in pressures_kpa {
+            let params = CurveParams {
+                sample_modulus_kpa: scenario.sample.modulus_kpa * factor,
+                pressure_kpa: p,
+                max_depth_mm: *max_depth_mm,
+                steps: *steps,
+                mesh_level: *mesh_level,
+                ..sample_params(&scenario.sample)
+            };
+            let curve =
+                fem_core::solve_curve(&params).map_err(|source| MechanicsSourceError::Solve {
+                    modulus_kpa: params.sample_modulus_kpa,
+                    pressure_kpa: p,
+                    source,
+                })?;
+            curves.push(curve);
+        }
+    }
+    Ok(curves)
 }
 
 /// fem-core parameters of the sample (modulus and pressure are set by the caller).

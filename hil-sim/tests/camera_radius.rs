@@ -21,7 +21,7 @@ fn scene(radius_px: f64, axis_ratio: f64, noise: bool) -> FrameScene {
 }
 
 /// Radius from the area integral of the contrast image.
-fn measured_radius(cam: &CameraRenderer, radius_px: f64, axis_ratio: f64, noise: bool) -> f64 {
+fn measured_radius(cam: &mut CameraRenderer, radius_px: f64, axis_ratio: f64, noise: bool) -> f64 {
     let mut rng = SimRng::new(9);
     let sigma = cam.config().blur_sigma_px;
     let with = cam.render(&scene(radius_px, axis_ratio, noise), &mut rng);
@@ -49,26 +49,26 @@ fn measured_radius(cam: &CameraRenderer, radius_px: f64, axis_ratio: f64, noise:
 
 #[test]
 fn disc_radius_matches_the_configured_radius() {
-    let cam = CameraRenderer::new(CameraConfig {
+    let mut cam = CameraRenderer::new(CameraConfig {
         noise_levels: 2.0,
         ..CameraConfig::default()
     });
     for &(r, k) in &[(37.3, 1.0), (101.7, 1.0), (160.25, 1.0), (120.4, 0.9)] {
         // Noise-free: only the 8-bit rounding of the edge pixels remains (~1e-3 px).
-        let est = measured_radius(&cam, r, k, false);
+        let est = measured_radius(&mut cam, r, k, false);
         assert!((est - r).abs() < 0.01, "R = {r}, k = {k}: measured {est}");
         // With 2 grey levels of read noise in both frames (difference: 2.8 rms) over the
         // N = pi (R + 20)^2 pixels of the window and ~60 levels of contrast, the area's
         // noise is sqrt(N) 2.8 / 60 = 5..15 px^2, i.e. 0.02 px of radius; 0.1 px is 5 sigma.
-        let est = measured_radius(&cam, r, k, true);
+        let est = measured_radius(&mut cam, r, k, true);
         assert!((est - r).abs() < 0.1, "noisy R = {r}: measured {est}");
     }
 }
 
 #[test]
 fn frames_are_640x480_gray8_and_yuyv() {
-    let gray = CameraRenderer::new(CameraConfig::default());
-    let yuyv = CameraRenderer::new(CameraConfig {
+    let mut gray = CameraRenderer::new(CameraConfig::default());
+    let mut yuyv = CameraRenderer::new(CameraConfig {
         format: PixelFormat::Yuyv,
         ..CameraConfig::default()
     });

@@ -1,6 +1,9 @@
 //! `hil-sim [--scenario FILE] [--seed N] [--pacing auto|realtime|fast] [--no-camera]`:
 //! serves the simulated bench on a pseudo-terminal until killed, printing the port's path.
 //!
+//! `hil-sim --save-curves DIR --scenario FILE` runs a `solve` scenario's fem-core solves once
+//! and writes them as JSON files for a `curves` mechanics source (fast start-up).
+//!
 //! `hil-sim --run [--scenario FILE] [--seed N]` instead simulates the scenario's duration
 //! (its built-in programme, no host) as fast as possible and prints the timing.
 
@@ -18,6 +21,7 @@ struct Args {
     pacing: Pacing,
     camera: bool,
     run: bool,
+    save_curves: Option<PathBuf>,
 }
 
 fn parse_args() -> Result<Args, String> {
@@ -27,6 +31,7 @@ fn parse_args() -> Result<Args, String> {
         pacing: Pacing::Auto,
         camera: true,
         run: false,
+        save_curves: None,
     };
     let mut it = std::env::args().skip(1);
     while let Some(arg) = it.next() {
@@ -55,8 +60,11 @@ fn parse_args() -> Result<Args, String> {
             }
             "--no-camera" => args.camera = false,
             "--run" => args.run = true,
+            "--save-curves" => {
+                args.save_curves = Some(it.next().ok_or("--save-curves needs a directory")?.into());
+            }
             "-h" | "--help" => {
-                return Err("usage: hil-sim [--scenario FILE] [--seed N] [--pacing auto|realtime|fast] [--no-camera] [--run]".into());
+                return Err("usage: hil-sim [--scenario FILE] [--seed N] [--pacing auto|realtime|fast] [--no-camera] [--run] [--save-curves DIR]".into());
             }
             other => return Err(format!("unknown argument `{other}` (try --help)")),
         }
@@ -84,6 +92,9 @@ fn main() -> ExitCode {
     };
     if let Some(seed) = args.seed {
         scenario.seed = seed;
+    }
+    if let Some(dir) = &args.save_curves {
+        return save_curves(&scenario, dir);
     }
     if args.run {
         let duration = scenario.duration_s;
@@ -136,4 +147,40 @@ fn main() -> ExitCode {
         while handle.frames.try_recv().is_ok() {}
         std::thread::sleep(std::time::Duration::from_millis(5));
     }
+}
+
+fn save_curves(scenario: &Scenario, dir: &std::path::Path) -> ExitCode {
+    let curves = match hil_sim::mechanics_source::solve_curves(scenario) {
+        Ok(c) if c.is_empty() => {
+            eprintln!("hil-sim: --save-curves needs a scenario whose mechanics source is `solve`");
+            return ExitCode::from(2);
+        }
+        Ok(c) => c,
+        Err(e) => {
+            eprintln!("hil-sim: {e}");
+            return ExitCode::from(1);
+        }
+    };
+    if let Err(e) = std::fs::create_dir_all(dir) {
+        eprintln!("hil-sim: {}: {e}", dir.display());
+        return ExitCode::from(1);
+    }
+    for c in &curves {
+        let name = format!(
+            "curve-E{}-p{}.json",
+            c.params.sample_modulus_kpa, c.params.pressure_kpa
+        );
+        let path = dir.join(name);
+        let written = serde_json::to_string(c)
+            .map_err(|e| e.to_string())
+            .and_then(|text| std::fs::write(&path, text).map_err(|e| e.to_string()));
+        match written {
+            Ok(()) => println!("{}", path.display()),
+            Err(e) => {
+                eprintln!("hil-sim: {}: {e}", path.display());
+                return ExitCode::from(1);
+            }
+        }
+    }
+    ExitCode::SUCCESS
 }
