@@ -14,7 +14,10 @@ use crate::scenario::{MechanicsSource, SampleConfig, Scenario};
 pub enum MechanicsSourceError {
     #[error("{path}: {reason}")]
     File { path: PathBuf, reason: String },
-    #[error("lookup table {path}: {source}")]
+    #[error(
+        "mechanics source `lut` ({path}): {source} (build the table with fem-core's LUT \
+         builder, or name another source in the scenario's [mechanics] table)"
+    )]
     Lut {
         path: PathBuf,
         source: fem_core::lut::LutError,
