@@ -8,7 +8,8 @@
 //! `timestamp_us` is host time in µs since the simulation's epoch; once the bench runs in
 //! real time, [`BenchHandle::epoch`] gives the `Instant` of simulated time 0, so
 //! `epoch + timestamp_us` places a frame on the host's monotonic clock (the same clock the
-//! host stamps its pings with).
+//! host stamps its pings with); frames sent in real time carry that instant already
+//! (`SimFrame::captured_at`).
 //!
 //! Pacing ([`Pacing`]): `RealTime` keeps simulated time on the wall clock; `Fast` runs as
 //! fast as the CPU allows; `Auto` runs fast while no host has spoken and switches to real
@@ -228,7 +229,11 @@ fn serve(
                 pending_out.clear();
             }
         }
-        for frame in device.take_frames() {
+        let sim_epoch = real_time
+            .then(|| anchor.checked_sub(Duration::from_secs_f64(anchor_sim_s.max(0.0))))
+            .flatten();
+        for mut frame in device.take_frames() {
+            frame.captured_at = sim_epoch.map(|e| e + Duration::from_micros(frame.timestamp_us));
             match frame_tx.try_send(frame) {
                 Ok(()) | Err(TrySendError::Full(_)) => {}
                 Err(TrySendError::Disconnected(_)) => {}

@@ -45,6 +45,9 @@ pub struct SimFrame {
     pub height: usize,
     pub format: PixelFormat,
     pub data: Vec<u8>,
+    /// The exposure's centre on the host's monotonic clock, when the bench runs in real time
+    /// (set by [`crate::bench`]; `None` from a bare [`SimDevice`]).
+    pub captured_at: Option<std::time::Instant>,
 }
 
 /// Ground truth at one controller tick (never sent on the wire).
@@ -504,6 +507,7 @@ impl SimDevice {
                 height: cam.height,
                 format: cam.format,
                 data,
+                captured_at: None,
             });
         }
     }

@@ -102,6 +102,9 @@ fn a_client_on_the_pty_gets_its_handshake_and_frames_flow() {
     // Frames arrive at about the camera rate, lit by the LED the host switched on.
     let first = handle.frames.recv_timeout(Duration::from_secs(5)).unwrap();
     assert_eq!(first.data.len(), 640 * 480);
+    // Real time: the frame's instant lies in the past, within a few frame periods.
+    let age = first.captured_at.unwrap().elapsed();
+    assert!(age < Duration::from_millis(500), "{age:?}");
     let mean = first.data.iter().map(|&v| f64::from(v)).sum::<f64>() / first.data.len() as f64;
     assert!(mean > 40.0, "mean grey level {mean}");
     let stats = handle.stop();
