@@ -12,7 +12,8 @@
 //! (`SimFrame::captured_at`).
 //!
 //! Pacing ([`Pacing`]): `RealTime` keeps simulated time on the wall clock; `Fast` runs as
-//! fast as the CPU allows; `Auto` runs fast while no host has spoken and switches to real
+//! fast as the CPU allows; `Auto` runs 20x faster than real time while no host has spoken
+//! (not a whole core: the machine may be shared) and switches to real
 //! time (re-anchoring the epoch) at the first byte from the host. In `Auto`, frames are
 //! rendered only once a host has attached (before that nobody could look at them).
 //!
@@ -145,6 +146,9 @@ pub fn start_device(mut device: SimDevice, options: BenchOptions) -> Result<Benc
     })
 }
 
+/// How much faster than real time `Auto` runs while no host has spoken.
+const AUTO_IDLE_SPEEDUP: f64 = 20.0;
+
 /// Ticks simulated per batch between I/O polls.
 const TICKS_PER_BATCH: usize = 2;
 
@@ -208,6 +212,12 @@ fn serve(
         } else {
             for _ in 0..TICKS_PER_BATCH {
                 device.step();
+            }
+            // Waiting for a host in `Auto`: faster than real time, but not a whole core.
+            if options.pacing == Pacing::Auto
+                && device.time_s() > AUTO_IDLE_SPEEDUP * anchor.elapsed().as_secs_f64()
+            {
+                std::thread::sleep(Duration::from_millis(1));
             }
         }
         // Device -> host.
