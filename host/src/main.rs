@@ -25,6 +25,8 @@ enum Command {
     Lut(cli::lut::LutArgs),
     /// Finite-element simulation: write one simulated curve as a curve CSV.
     Fem(cli::fem::FemArgs),
+    /// Fit the sample's Young's modulus to a measured a–u_s curve.
+    Fit(cli::fit::FitArgs),
 }
 
 fn main() -> ExitCode {
@@ -35,5 +37,6 @@ fn main() -> ExitCode {
         Command::Flash(args) => cli::flash::run(args),
         Command::Lut(args) => cli::lut::run(args),
         Command::Fem(args) => cli::fem::run(args),
+        Command::Fit(args) => cli::fit::run(args),
     }
 }

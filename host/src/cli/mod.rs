@@ -2,6 +2,7 @@
 
 pub mod devices;
 pub mod fem;
+pub mod fit;
 pub mod flash;
 pub mod lut;
 pub mod radius;

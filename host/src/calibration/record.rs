@@ -1,0 +1,98 @@
+//! Calibration records: one JSON file per calibration run, named by its UTC time, in a
+//! calibration directory; later runs load the newest one.
+
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+use super::proximity::ProximityCalibration;
+
+/// Everything one calibration run produced.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CalibrationRecord {
+    /// UTC time of the run, seconds since the Unix epoch.
+    pub created_unix_s: u64,
+    pub device_serial: String,
+    pub firmware_version: String,
+    /// Proximity parabola per pressure, from u_s taken as fem-core's rigid-contact u_s(h)
+    /// when available, else u_s = h.
+    pub proximity: Vec<ProximityCalibration>,
+    /// The same fit with u_s = h (the paper's assumption), for comparison.
+    pub proximity_u_s_equals_h: Vec<ProximityCalibration>,
+    /// Largest difference in u_s between the two calibrations over the calibrated range.
+    pub u_s_vs_h_max_difference_mm: Option<f64>,
+    /// How the rigid-sample u_s(h) was obtained.
+    pub rigid_u_s_source: String,
+    /// Camera scale.
+    pub px_per_mm: Option<f64>,
+    /// Manometer reading at zero gauge pressure (vent open).
+    pub manometer_zero_kpa: f64,
+    /// Load-cell reading after the device's tare (should be ~0).
+    pub load_tare_residual_n: f64,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum CalibrationStoreError {
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{path}: not a calibration record: {source}")]
+    Json {
+        path: PathBuf,
+        #[source]
+        source: serde_json::Error,
+    },
+    #[error("no calibration record in {0}")]
+    None(PathBuf),
+}
+
+/// Writes `record` as `<dir>/calibration-<unix seconds>.json`; returns the path.
+pub fn save_record(
+    dir: &Path,
+    record: &CalibrationRecord,
+) -> Result<PathBuf, CalibrationStoreError> {
+    let io = |path: &Path| {
+        let path = path.to_path_buf();
+        move |source| CalibrationStoreError::Io { path, source }
+    };
+    std::fs::create_dir_all(dir).map_err(io(dir))?;
+    let path = dir.join(format!("calibration-{}.json", record.created_unix_s));
+    let text =
+        serde_json::to_string_pretty(record).map_err(|source| CalibrationStoreError::Json {
+            path: path.clone(),
+            source,
+        })?;
+    std::fs::write(&path, text).map_err(io(&path))?;
+    Ok(path)
+}
+
+/// The newest record in `dir`.
+pub fn load_latest(dir: &Path) -> Result<(PathBuf, CalibrationRecord), CalibrationStoreError> {
+    let entries = std::fs::read_dir(dir).map_err(|source| CalibrationStoreError::Io {
+        path: dir.to_path_buf(),
+        source,
+    })?;
+    let mut files: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            p.file_name()
+                .and_then(|n| n.to_str())
+                .is_some_and(|n| n.starts_with("calibration-") && n.ends_with(".json"))
+        })
+        .collect();
+    files.sort();
+    let path = files
+        .pop()
+        .ok_or_else(|| CalibrationStoreError::None(dir.to_path_buf()))?;
+    let text = std::fs::read_to_string(&path).map_err(|source| CalibrationStoreError::Io {
+        path: path.clone(),
+        source,
+    })?;
+    let record = serde_json::from_str(&text).map_err(|source| CalibrationStoreError::Json {
+        path: path.clone(),
+        source,
+    })?;
+    Ok((path, record))
+}

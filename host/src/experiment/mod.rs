@@ -1,0 +1,14 @@
+//! Experiments (DESIGN.md section 7): settle the pressure, tare, indent and retract with the
+//! stage while streaming, pair every camera frame's contact radius with u_s interpolated at
+//! the frame's time, split load and unload, repeat.
+//!
+//! - [`pairing`]: frames x samples -> a–u_s points;
+//! - [`indentation`]: the run itself against a [`crate::link::Link`] and a [`RadiusSource`].
+
+pub mod indentation;
+pub mod pairing;
+
+pub use indentation::{
+    ExperimentError, IndentationPlan, IndentationResult, RadiusSource, run_indentation,
+};
+pub use pairing::{DisplacementSample, PairedPoint, RadiusSample, pair_frames};

@@ -1,0 +1,588 @@
+//! The modulus estimate.
+//!
+//! **Estimate.** With x = ln E2, the model a_i(x) = A(x, p_i, u_i) from the table and the
+//! residuals r_i = a_i^meas - a_i(x), minimise S(x) = sum r_i^2 (plus, with the load
+//! channel, sum (w r^P_i)^2 with w = sigma_a / sigma_P from separate fits). A coarse scan
+//! over the table's modulus nodes picks the bracket [E_(k-1), E_(k+1)] around the best
+//! node; the points whose u_s every curve of the bracket reaches are kept (soft curves end
+//! at smaller u_s), and Gauss–Newton steps dx = sum r_i J_i / sum J_i^2 with J_i =
+//! dA/d ln E2 (the table's analytic PCHIP derivative) and step halving converge to the
+//! continuous minimum. If it lands on an inner bracket edge the bracket moves and the fit
+//! repeats.
+//!
+//! **95 % interval** (stated in [`ModulusFit::ci_method`]):
+//! - residual model, always computed: sigma^2 = S / (n - 1), Var(x) = sigma^2 / sum J^2,
+//!   inflated by n / n_eff with n_eff = n (1 - rho) / (1 + rho) from the lag-1
+//!   autocorrelation rho of the residuals along each curve (an AR(1) model of the
+//!   within-curve correlation), Student t with n_eff - 1 degrees of freedom;
+//! - replicates (two or more `test` values with enough points): each replicate is fitted
+//!   alone; the standard error of the mean of their ln E2 is sd / sqrt(m), Student t with
+//!   m - 1 degrees of freedom. This captures run-to-run scatter whatever its correlation
+//!   within a run. The interval uses the larger of the two standard errors.
+//!
+//! Neither term includes the table's own interpolation error or model error (a wrong
+//! friction, thickness, ...): those are systematic and are what the diagnosis looks for.
+
+use serde::Serialize;
+
+use super::model::LutModel;
+use super::points::FitPoint;
+
+/// Fit settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FitOptions {
+    /// Add the load channel (P–u_s) to the objective when the points carry loads.
+    pub use_load: bool,
+    /// Gauss–Newton iteration limit per bracket.
+    pub max_iterations: usize,
+}
+
+impl Default for FitOptions {
+    fn default() -> Self {
+        Self {
+            use_load: false,
+            max_iterations: 40,
+        }
+    }
+}
+
+/// Why the fit failed.
+#[derive(Debug, thiserror::Error)]
+pub enum FitError {
+    #[error("too few points to fit: {usable} usable of {total} (need at least 3)")]
+    TooFewPoints { usable: usize, total: usize },
+    #[error("pressure {p_air_kpa} kPa is outside the table's pressures {min_kpa}..{max_kpa} kPa")]
+    PressureOutsideTable {
+        p_air_kpa: f64,
+        min_kpa: f64,
+        max_kpa: f64,
+    },
+    #[error("no modulus in the table reaches the measured u_s range: {0}")]
+    NoCoverage(String),
+    #[error("table: {0}")]
+    Lut(#[from] fem_core::lut::LutError),
+}
+
+/// How the interval was computed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum CiMethod {
+    /// Residual variance with AR(1) within-curve correlation.
+    ResidualAr1,
+    /// Between-replicate scatter of per-replicate fits (it was the larger term).
+    Replicates,
+}
+
+/// The single-pressure fit at one pressure of a joint fit.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct PressureFit {
+    pub p_air_kpa: f64,
+    pub modulus_kpa: f64,
+    pub ci95_kpa: [f64; 2],
+    pub points: usize,
+    pub rms_residual_mm: f64,
+}
+
+/// The result.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ModulusFit {
+    pub modulus_kpa: f64,
+    pub ci95_kpa: [f64; 2],
+    /// RMS of the a residuals of the used points.
+    pub rms_residual_mm: f64,
+    pub ci_method: CiMethod,
+    pub ci_description: String,
+    pub points_used: usize,
+    /// Points outside the u_s range the table covers near the estimate.
+    pub points_excluded: usize,
+    pub pressures_kpa: Vec<f64>,
+    /// Fits at each pressure alone (when several were measured).
+    pub per_pressure: Vec<PressureFit>,
+    /// Per-replicate estimates (when replicates are present).
+    pub replicate_moduli_kpa: Vec<f64>,
+    /// Effective independent points after the AR(1) correction, and the lag-1 correlation.
+    pub effective_points: f64,
+    pub residual_lag1_correlation: f64,
+    /// Standard errors of ln E2: residual model and replicates (0 if none).
+    pub se_ln_modulus_residual: f64,
+    pub se_ln_modulus_replicates: f64,
+    pub iterations: usize,
+    pub load_channel_used: bool,
+    pub rms_residual_load_n: Option<f64>,
+}
+
+/// Core result of one least-squares fit.
+#[derive(Debug, Clone)]
+struct Core {
+    x: f64,
+    residuals: Vec<f64>,
+    jacobian: Vec<f64>,
+    used: Vec<usize>,
+    excluded: usize,
+    iterations: usize,
+    rms_load: Option<f64>,
+}
+
+/// Student t quantile t_{0.975, dof}: exact table to 10 degrees of freedom, then the
+/// Cornish–Fisher expansion (error < 1e-3).
+pub fn t975(dof: f64) -> f64 {
+    const TABLE: [f64; 10] = [
+        12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228,
+    ];
+    if dof < 1.0 {
+        return TABLE[0];
+    }
+    if dof <= 10.0 {
+        // linear between integer degrees of freedom
+        let k = dof.floor() as usize;
+        let f = dof - k as f64;
+        let lo = TABLE[k - 1];
+        let hi = if k < 10 { TABLE[k] } else { TABLE[9] };
+        return lo + f * (hi - lo);
+    }
+    let z: f64 = 1.959_964;
+    let v = dof;
+    z + (z.powi(3) + z) / (4.0 * v)
+        + (5.0 * z.powi(5) + 16.0 * z.powi(3) + 3.0 * z) / (96.0 * v * v)
+        + (3.0 * z.powi(7) + 19.0 * z.powi(5) + 17.0 * z.powi(3) - 15.0 * z) / (384.0 * v.powi(3))
+}
+
+struct Problem<'m, 'a> {
+    model: &'m LutModel<'a>,
+    points: &'m [FitPoint],
+    /// Weight of load residuals (sigma_a / sigma_P), 0 without the load channel.
+    load_weight: f64,
+}
+
+impl Problem<'_, '_> {
+    /// Residuals (a, then weighted load) and d a / d ln E2 at x for the points `used`.
+    fn eval(&self, x: f64, used: &[usize], want_j: bool) -> Option<(Vec<f64>, Vec<f64>)> {
+        let e = x.exp();
+        let mut r = Vec::with_capacity(used.len() * 2);
+        let mut j = Vec::with_capacity(if want_j { used.len() * 2 } else { 0 });
+        let mut rl = Vec::new();
+        let mut jl = Vec::new();
+        for &i in used {
+            let p = &self.points[i];
+            let s = self.model.sample(e, p.p_air_kpa, p.u_s_mm).ok()?;
+            r.push(p.a_mm - s.a_mm);
+            if want_j {
+                j.push(s.da_dln_modulus_mm);
+            }
+            if self.load_weight > 0.0
+                && let Some(load) = p.load_n
+            {
+                rl.push(self.load_weight * (load - s.load_n));
+                if want_j {
+                    // dP/d ln E2 by a central difference inside the table
+                    let h = 1e-4;
+                    let (lo, hi) = self.ln_range();
+                    let (xa, xb) = ((x - h).max(lo), (x + h).min(hi));
+                    let pa = self.model.sample(xa.exp(), p.p_air_kpa, p.u_s_mm).ok()?;
+                    let pb = self.model.sample(xb.exp(), p.p_air_kpa, p.u_s_mm).ok()?;
+                    jl.push(self.load_weight * (pb.load_n - pa.load_n) / (xb - xa));
+                }
+            }
+        }
+        r.extend(rl);
+        j.extend(jl);
+        Some((r, j))
+    }
+
+    fn ln_range(&self) -> (f64, f64) {
+        let m = self.model.moduli_kpa();
+        (m[0].ln(), m[m.len() - 1].ln())
+    }
+
+    fn sum_sq(&self, x: f64, used: &[usize]) -> Option<f64> {
+        self.eval(x, used, false)
+            .map(|(r, _)| r.iter().map(|v| v * v).sum())
+    }
+
+    /// Points whose u_s the whole modulus bracket covers.
+    fn usable(
+        &self,
+        lo_kpa: f64,
+        hi_kpa: f64,
+        subset: &[usize],
+    ) -> Result<(Vec<usize>, usize), FitError> {
+        let mut ranges: Vec<(f64, (f64, f64))> = Vec::new();
+        let mut used = Vec::new();
+        let mut excluded = 0;
+        for &i in subset {
+            let p = &self.points[i];
+            let range = match ranges.iter().find(|(q, _)| *q == p.p_air_kpa) {
+                Some((_, r)) => *r,
+                None => {
+                    let r = self
+                        .model
+                        .common_u_s_range_mm(lo_kpa, hi_kpa, p.p_air_kpa)?;
+                    ranges.push((p.p_air_kpa, r));
+                    r
+                }
+            };
+            if p.u_s_mm >= range.0 && p.u_s_mm <= range.1 && p.a_mm.is_finite() {
+                used.push(i);
+            } else {
+                excluded += 1;
+            }
+        }
+        Ok((used, excluded))
+    }
+
+    /// Least squares over `subset` of the points.
+    fn solve(&self, subset: &[usize], max_iterations: usize) -> Result<Core, FitError> {
+        let nodes = self.model.moduli_kpa().to_vec();
+        // coarse scan: mean square residual at each node over the points it covers
+        let mut best: Option<(usize, f64)> = None;
+        for (k, &e) in nodes.iter().enumerate() {
+            let mut sum = 0.0;
+            let mut n = 0usize;
+            for &i in subset {
+                let p = &self.points[i];
+                if let Ok(s) = self.model.sample(e, p.p_air_kpa, p.u_s_mm) {
+                    sum += (p.a_mm - s.a_mm).powi(2);
+                    n += 1;
+                }
+            }
+            // a node must explain most of the points to be a candidate
+            if n * 2 >= subset.len() && n >= 3 {
+                let ms = sum / n as f64;
+                if best.is_none_or(|(_, b)| ms < b) {
+                    best = Some((k, ms));
+                }
+            }
+        }
+        let Some((mut k, _)) = best else {
+            return Err(FitError::NoCoverage(format!(
+                "{} points, u_s up to {:.3} mm",
+                subset.len(),
+                subset
+                    .iter()
+                    .map(|&i| self.points[i].u_s_mm)
+                    .fold(0.0, f64::max)
+            )));
+        };
+        let mut total_iterations = 0;
+        let mut last: Option<Core> = None;
+        for _round in 0..4 {
+            let k0 = k.saturating_sub(1);
+            let k1 = (k + 1).min(nodes.len() - 1);
+            let (lo, hi) = (nodes[k0].ln(), nodes[k1].ln());
+            let (used, excluded) = self.usable(nodes[k0], nodes[k1], subset)?;
+            if used.len() < 3 {
+                return Err(FitError::TooFewPoints {
+                    usable: used.len(),
+                    total: subset.len(),
+                });
+            }
+            let mut x = nodes[k].ln();
+            let mut s = self.sum_sq(x, &used).unwrap_or(f64::INFINITY);
+            for _ in 0..max_iterations {
+                total_iterations += 1;
+                let Some((r, j)) = self.eval(x, &used, true) else {
+                    break;
+                };
+                let jj: f64 = j.iter().map(|v| v * v).sum();
+                if jj <= 0.0 {
+                    break;
+                }
+                let rj: f64 = r.iter().zip(&j).map(|(a, b)| a * b).sum();
+                let mut step = rj / jj;
+                let mut accepted = false;
+                for _ in 0..30 {
+                    let xn = (x + step).clamp(lo, hi);
+                    if let Some(sn) = self.sum_sq(xn, &used)
+                        && sn <= s
+                    {
+                        let moved = (xn - x).abs();
+                        x = xn;
+                        s = sn;
+                        accepted = moved > 0.0;
+                        break;
+                    }
+                    step *= 0.5;
+                }
+                if !accepted || step.abs() < 1e-9 {
+                    break;
+                }
+            }
+            let (residuals, jacobian) = self
+                .eval(x, &used, true)
+                .ok_or_else(|| FitError::NoCoverage("lost coverage at the estimate".into()))?;
+            let rms_load = if self.load_weight > 0.0 {
+                let nl = residuals.len() - used.len();
+                (nl > 0).then(|| {
+                    (residuals[used.len()..]
+                        .iter()
+                        .map(|v| (v / self.load_weight).powi(2))
+                        .sum::<f64>()
+                        / nl as f64)
+                        .sqrt()
+                })
+            } else {
+                None
+            };
+            let core = Core {
+                x,
+                residuals,
+                jacobian,
+                used,
+                excluded,
+                iterations: total_iterations,
+                rms_load,
+            };
+            // on an inner bracket edge: move the bracket and refit
+            let at_lo = (x - lo).abs() < 1e-9 && k0 > 0;
+            let at_hi = (x - hi).abs() < 1e-9 && k1 < nodes.len() - 1;
+            last = Some(core);
+            if at_lo {
+                k = k0;
+            } else if at_hi {
+                k = k1;
+            } else {
+                break;
+            }
+        }
+        last.ok_or_else(|| FitError::NoCoverage("no bracket".into()))
+    }
+}
+
+/// Lag-1 autocorrelation of the a residuals along each curve (points grouped by pressure
+/// and replicate, ordered by u_s).
+fn lag1_correlation(points: &[FitPoint], used: &[usize], residuals: &[f64]) -> f64 {
+    let mut order: Vec<usize> = (0..used.len()).collect();
+    order.sort_by(|&a, &b| {
+        let (pa, pb) = (&points[used[a]], &points[used[b]]);
+        pa.p_air_kpa
+            .total_cmp(&pb.p_air_kpa)
+            .then(pa.test.cmp(&pb.test))
+            .then(pa.u_s_mm.total_cmp(&pb.u_s_mm))
+    });
+    let mean = residuals[..used.len()].iter().sum::<f64>() / used.len() as f64;
+    let var: f64 = residuals[..used.len()]
+        .iter()
+        .map(|r| (r - mean).powi(2))
+        .sum();
+    if var <= 0.0 {
+        return 0.0;
+    }
+    let mut cov = 0.0;
+    for w in order.windows(2) {
+        let (a, b) = (&points[used[w[0]]], &points[used[w[1]]]);
+        if a.p_air_kpa == b.p_air_kpa && a.test == b.test {
+            cov += (residuals[w[0]] - mean) * (residuals[w[1]] - mean);
+        }
+    }
+    (cov / var).clamp(-0.99, 0.99)
+}
+
+/// Fits E2 to `points` (any number of pressures and replicates).
+pub fn fit_modulus(
+    model: &LutModel<'_>,
+    points: &[FitPoint],
+    options: FitOptions,
+) -> Result<ModulusFit, FitError> {
+    let pressures_axis = model.pressures_kpa();
+    let (pmin, pmax) = (pressures_axis[0], pressures_axis[pressures_axis.len() - 1]);
+    let mut pressures: Vec<f64> = Vec::new();
+    for p in points {
+        if p.p_air_kpa < pmin || p.p_air_kpa > pmax {
+            return Err(FitError::PressureOutsideTable {
+                p_air_kpa: p.p_air_kpa,
+                min_kpa: pmin,
+                max_kpa: pmax,
+            });
+        }
+        if !pressures.contains(&p.p_air_kpa) {
+            pressures.push(p.p_air_kpa);
+        }
+    }
+    pressures.sort_by(f64::total_cmp);
+    let all: Vec<usize> = (0..points.len()).collect();
+    let a_only = Problem {
+        model,
+        points,
+        load_weight: 0.0,
+    };
+    let mut core = a_only.solve(&all, options.max_iterations)?;
+    let n = core.used.len();
+    let sigma_a = (core.residuals[..n].iter().map(|r| r * r).sum::<f64>()
+        / (n.saturating_sub(1).max(1)) as f64)
+        .sqrt();
+    let mut load_used = false;
+    if options.use_load
+        && core
+            .used
+            .iter()
+            .filter(|&&i| points[i].load_n.is_some())
+            .count()
+            >= 3
+    {
+        // sigma_P from the load residuals at the a-only estimate
+        let e = core.x.exp();
+        let mut sum = 0.0;
+        let mut m = 0usize;
+        for &i in &core.used {
+            if let Some(load) = points[i].load_n
+                && let Ok(s) = model.sample(e, points[i].p_air_kpa, points[i].u_s_mm)
+            {
+                sum += (load - s.load_n).powi(2);
+                m += 1;
+            }
+        }
+        let sigma_p = (sum / m.max(1) as f64).sqrt();
+        if sigma_p > 0.0 && sigma_a > 0.0 {
+            let with_load = Problem {
+                model,
+                points,
+                load_weight: sigma_a / sigma_p,
+            };
+            core = with_load.solve(&all, options.max_iterations)?;
+            load_used = true;
+        }
+    }
+    let n = core.used.len();
+    let sum_sq_a: f64 = core.residuals[..n].iter().map(|r| r * r).sum();
+    let rms = (sum_sq_a / n as f64).sqrt();
+    let s_total: f64 = core.residuals.iter().map(|r| r * r).sum();
+    let jj: f64 = core.jacobian.iter().map(|j| j * j).sum();
+    let m_total = core.residuals.len();
+    let sigma2 = s_total / (m_total.saturating_sub(1).max(1)) as f64;
+    let rho = lag1_correlation(points, &core.used, &core.residuals).max(0.0);
+    let n_eff = (n as f64 * (1.0 - rho) / (1.0 + rho)).clamp(2.0, n as f64);
+    let se_resid = if jj > 0.0 {
+        (sigma2 / jj * n as f64 / n_eff).sqrt()
+    } else {
+        f64::INFINITY
+    };
+    let half_resid = t975(n_eff - 1.0) * se_resid;
+
+    // replicates
+    let mut tests: Vec<u32> = points.iter().map(|p| p.test).collect();
+    tests.sort_unstable();
+    tests.dedup();
+    let mut replicate_moduli = Vec::new();
+    if tests.len() >= 2 {
+        let problem = Problem {
+            model,
+            points,
+            load_weight: 0.0,
+        };
+        for t in &tests {
+            let subset: Vec<usize> = (0..points.len())
+                .filter(|&i| points[i].test == *t)
+                .collect();
+            if subset.len() >= 3
+                && let Ok(c) = problem.solve(&subset, options.max_iterations)
+            {
+                replicate_moduli.push(c.x.exp());
+            }
+        }
+    }
+    let (se_rep, half_rep) = if replicate_moduli.len() >= 2 {
+        let m = replicate_moduli.len() as f64;
+        let logs: Vec<f64> = replicate_moduli.iter().map(|e| e.ln()).collect();
+        let mean = logs.iter().sum::<f64>() / m;
+        let sd = (logs.iter().map(|l| (l - mean).powi(2)).sum::<f64>() / (m - 1.0)).sqrt();
+        let se = sd / m.sqrt();
+        (se, t975(m - 1.0) * se)
+    } else {
+        (0.0, 0.0)
+    };
+    let (half, method, description) = if half_rep > half_resid {
+        (
+            half_rep,
+            CiMethod::Replicates,
+            format!(
+                "between-replicate scatter of {} per-replicate fits (standard error of the mean ln E2, Student t with {} dof); larger than the residual-model interval",
+                replicate_moduli.len(),
+                replicate_moduli.len() - 1
+            ),
+        )
+    } else {
+        (
+            half_resid,
+            CiMethod::ResidualAr1,
+            format!(
+                "residual variance with AR(1) within-curve correlation (lag-1 rho = {rho:.2}, {n_eff:.1} effective of {n} points, Student t){}",
+                if replicate_moduli.len() >= 2 {
+                    "; larger than the between-replicate interval"
+                } else {
+                    ""
+                }
+            ),
+        )
+    };
+
+    // per-pressure fits when several pressures were measured
+    let mut per_pressure = Vec::new();
+    if pressures.len() >= 2 {
+        for &p in &pressures {
+            let subset: Vec<usize> = (0..points.len())
+                .filter(|&i| points[i].p_air_kpa == p)
+                .collect();
+            let sub_points: Vec<FitPoint> = subset.iter().map(|&i| points[i]).collect();
+            if let Ok(f) = fit_modulus(
+                model,
+                &sub_points,
+                FitOptions {
+                    use_load: false,
+                    ..options
+                },
+            ) {
+                per_pressure.push(PressureFit {
+                    p_air_kpa: p,
+                    modulus_kpa: f.modulus_kpa,
+                    ci95_kpa: f.ci95_kpa,
+                    points: f.points_used,
+                    rms_residual_mm: f.rms_residual_mm,
+                });
+            }
+        }
+    }
+
+    Ok(ModulusFit {
+        modulus_kpa: core.x.exp(),
+        ci95_kpa: [(core.x - half).exp(), (core.x + half).exp()],
+        rms_residual_mm: rms,
+        ci_method: method,
+        ci_description: description,
+        points_used: n,
+        points_excluded: core.excluded,
+        pressures_kpa: pressures,
+        per_pressure,
+        replicate_moduli_kpa: replicate_moduli,
+        effective_points: n_eff,
+        residual_lag1_correlation: rho,
+        se_ln_modulus_residual: se_resid,
+        se_ln_modulus_replicates: se_rep,
+        iterations: core.iterations,
+        load_channel_used: load_used,
+        rms_residual_load_n: core.rms_load,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::t975;
+
+    #[test]
+    fn t_quantiles_match_tables() {
+        // Published two-sided 95 % values (e.g. NIST/SEMATECH e-Handbook table 1.4.2.7.2).
+        for (dof, t) in [
+            (1.0, 12.706),
+            (4.0, 2.776),
+            (10.0, 2.228),
+            (20.0, 2.086),
+            (30.0, 2.042),
+            (120.0, 1.980),
+        ] {
+            assert!(
+                (t975(dof) - t).abs() < 2e-3,
+                "dof {dof}: {} vs {t}",
+                t975(dof)
+            );
+        }
+    }
+}

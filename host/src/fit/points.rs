@@ -1,0 +1,67 @@
+//! Measured points as the fit sees them, from the curve CSV (DESIGN.md section 7).
+
+use crate::curve_csv::{CurveCsv, Phase};
+
+/// One measured point.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FitPoint {
+    pub u_s_mm: f64,
+    pub a_mm: f64,
+    pub p_air_kpa: f64,
+    /// Replicate index (0 when the file has none).
+    pub test: u32,
+    pub load_n: Option<f64>,
+}
+
+/// Why a curve file cannot be fitted.
+#[derive(Debug, thiserror::Error)]
+pub enum PointsError {
+    #[error("{file}: no internal pressure: give a p_air_kpa column or a '# p_air_kpa: <kPa>' line")]
+    NoPressure { file: String },
+    #[error("{file}: '# p_air_kpa: {value}' is not a number")]
+    BadPressure { file: String, value: String },
+    #[error("{file}: no loading points to fit")]
+    Empty { file: String },
+}
+
+/// The loading points of a curve file (unloading rows are left out: the model is the
+/// loading curve). The pressure comes from the row's `p_air_kpa` or the file's
+/// `# p_air_kpa:` line.
+pub fn points_from_curve_csv(curve: &CurveCsv, file: &str) -> Result<Vec<FitPoint>, PointsError> {
+    let default_p = match curve.meta("p_air_kpa") {
+        Some(v) => Some(
+            v.trim()
+                .parse::<f64>()
+                .map_err(|_| PointsError::BadPressure {
+                    file: file.to_string(),
+                    value: v.to_string(),
+                })?,
+        ),
+        None => None,
+    };
+    let mut out = Vec::new();
+    for row in &curve.rows {
+        if row.phase == Some(Phase::Unload) {
+            continue;
+        }
+        let p = row
+            .p_air_kpa
+            .or(default_p)
+            .ok_or_else(|| PointsError::NoPressure {
+                file: file.to_string(),
+            })?;
+        out.push(FitPoint {
+            u_s_mm: row.u_s_mm,
+            a_mm: row.a_mm,
+            p_air_kpa: p,
+            test: row.test.unwrap_or(0),
+            load_n: row.load_n,
+        });
+    }
+    if out.is_empty() {
+        return Err(PointsError::Empty {
+            file: file.to_string(),
+        });
+    }
+    Ok(out)
+}

@@ -1,0 +1,19 @@
+//! The typed client of the device protocol (DESIGN.md section 4):
+//!
+//! - [`transport`]: the byte pipe ([`Transport`]): a serial port ([`SerialTransport`]) or an
+//!   in-process device ([`loopback`]);
+//! - [`client`]: [`Link`], the handshake, requests with sequence numbers, timeouts and
+//!   bounded retries, heartbeats, the sample stream with loss counting;
+//! - [`clock_map`]: host <-> device clock mapping from ping round trips;
+//! - [`units`]: raw counts to physical units with the device's [`protocol::DeviceInfo`].
+
+pub mod client;
+pub mod clock_map;
+pub mod loopback;
+pub mod transport;
+pub mod units;
+
+pub use client::{Link, LinkConfig, LinkError, LinkStats, TimedSample};
+pub use clock_map::{ClockFit, ClockMap};
+pub use transport::{SerialTransport, Transport, TransportError};
+pub use units::SampleUnits;
