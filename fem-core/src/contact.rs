@@ -25,8 +25,10 @@
 //! width ([`smooth_ramp`]) so that nodes entering or leaving contact do not make Newton cycle.
 //! The contact pressure reported is `f_n` over the current tributary area.
 
-use std::f64::consts::PI;
+// Index loops mirror the tensor-index equations of the numerical kernels.
+#![allow(clippy::needless_range_loop)]
 
+use std::f64::consts::PI;
 
 /// Uniform Catmull–Rom basis on t in [0, 1] for control points (P0, P1, P2, P3), the
 /// segment running from P1 to P2, and its first and second derivatives.
@@ -240,16 +242,37 @@ fn build_segments(masters: &[usize], nodes: &[[f64; 2]]) -> Vec<Segment> {
             vec![term(k as usize)]
         } else if k < 0 {
             if on_axis(0) {
-                vec![ControlTerm { sign_r: -1.0, ..term(1) }]
+                vec![ControlTerm {
+                    sign_r: -1.0,
+                    ..term(1)
+                }]
             } else {
-                vec![ControlTerm { coef: 2.0, ..term(0) }, ControlTerm { coef: -1.0, ..term(1) }]
+                vec![
+                    ControlTerm {
+                        coef: 2.0,
+                        ..term(0)
+                    },
+                    ControlTerm {
+                        coef: -1.0,
+                        ..term(1)
+                    },
+                ]
             }
         } else if on_axis(n - 1) {
-            vec![ControlTerm { sign_r: -1.0, ..term(n - 2) }]
+            vec![ControlTerm {
+                sign_r: -1.0,
+                ..term(n - 2)
+            }]
         } else {
             vec![
-                ControlTerm { coef: 2.0, ..term(n - 1) },
-                ControlTerm { coef: -1.0, ..term(n - 2) },
+                ControlTerm {
+                    coef: 2.0,
+                    ..term(n - 1)
+                },
+                ControlTerm {
+                    coef: -1.0,
+                    ..term(n - 2)
+                },
             ]
         }
     };
@@ -336,7 +359,12 @@ impl ContactPair {
 
     /// Gap and its gradient for segment `seg` with the slave at `xs` and the segment's nodes
     /// at `coords` (in `seg.nodes` order).
-    fn gap_and_gradient(&self, seg: &Segment, xs: [f64; 2], coords: &[[f64; 2]]) -> Option<(Gap, Vec<f64>)> {
+    fn gap_and_gradient(
+        &self,
+        seg: &Segment,
+        xs: [f64; 2],
+        coords: &[[f64; 2]],
+    ) -> Option<(Gap, Vec<f64>)> {
         let pos = |node: usize| {
             let j = seg.nodes.iter().position(|&n| n == node).unwrap_or(0);
             coords[j]
@@ -400,12 +428,15 @@ impl ContactPair {
                 continue;
             }
             let n = grad.len();
-            let hess = self.gap_hessian(seg, xs, &coords).unwrap_or_else(|| vec![0.0; n * n]);
+            let hess = self
+                .gap_hessian(seg, xs, &coords)
+                .unwrap_or_else(|| vec![0.0; n * n]);
             let residual: Vec<f64> = grad.iter().map(|d| -force * d).collect();
             let mut tangent = vec![0.0; n * n];
             for a in 0..n {
                 for b in 0..n {
-                    tangent[a * n + b] = stiff * slope * grad[a] * grad[b] - force * hess[a * n + b];
+                    tangent[a * n + b] =
+                        stiff * slope * grad[a] * grad[b] - force * hess[a * n + b];
                 }
             }
             let mut nodes = vec![slave];
@@ -449,7 +480,10 @@ impl ContactPair {
                 continue;
             };
             let stiff = self.penalty_kpa_per_mm * self.slave_areas_mm2[s];
-            let (f, _) = smooth_ramp(self.multipliers[s] - stiff * g, stiff * self.smoothing_gap_mm);
+            let (f, _) = smooth_ramp(
+                self.multipliers[s] - stiff * g,
+                stiff * self.smoothing_gap_mm,
+            );
             if f > 0.0 {
                 max_pen = max_pen.max(-g);
             }
@@ -515,7 +549,10 @@ mod tests {
             // central differences: O(step^2) truncation
             assert!(((gp - gm) / (2.0 * step) - grad[m]).abs() < 1e-7, "dg[{m}]");
             let fd2 = (gp - 2.0 * g0.gap_mm + gm) / (step * step);
-            assert!((fd2 - hess[m * n + m]).abs() < 1e-3 * (1.0 + fd2.abs()), "H[{m}][{m}]");
+            assert!(
+                (fd2 - hess[m * n + m]).abs() < 1e-3 * (1.0 + fd2.abs()),
+                "H[{m}][{m}]"
+            );
         }
     }
 

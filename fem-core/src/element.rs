@@ -14,6 +14,9 @@
 //! nu -> 1/2. [`Formulation::Displacement`] evaluates `p = kappa theta` pointwise instead
 //! (the classical, locking, pure-displacement element) and exists to demonstrate locking.
 
+// Index loops mirror the tensor-index equations of the numerical kernels.
+#![allow(clippy::needless_range_loop)]
+
 use nalgebra::{SMatrix, SVector};
 
 use crate::material::{Material, respond};
@@ -195,7 +198,10 @@ mod tests {
             for i in 0..3 {
                 let s = i as f64 * 0.5;
                 let t = j as f64 * 0.5;
-                x[3 * j + i] = [1.0 + 0.8 * s + 0.1 * t * t, 0.3 * s * s + 0.6 * t + 0.05 * s * t];
+                x[3 * j + i] = [
+                    1.0 + 0.8 * s + 0.1 * t * t,
+                    0.3 * s * s + 0.6 * t + 0.05 * s * t,
+                ];
             }
         }
         x

@@ -8,6 +8,9 @@
 //! (a tangent that is not positive definite, e.g. near a limit point), the full symmetric
 //! matrix is factored with sparse LU instead.
 
+// Index loops mirror the tensor-index equations of the numerical kernels.
+#![allow(clippy::needless_range_loop)]
+
 use faer::linalg::solvers::Solve;
 use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
 use faer::sparse::{Pair, SparseColMat, SymbolicSparseColMat, Triplet};
@@ -87,7 +90,12 @@ impl SymmetricSolver {
     /// The sparsity pattern only grows: when new entries appear (new contact pairs), the
     /// pattern becomes the union of the old one and the new entries, so that after the
     /// contact zone has been swept the symbolic factorisation is no longer repeated.
-    pub fn solve(&mut self, n: usize, t: &UpperTriplets, rhs: &[f64]) -> Result<Vec<f64>, FemError> {
+    pub fn solve(
+        &mut self,
+        n: usize,
+        t: &UpperTriplets,
+        rhs: &[f64],
+    ) -> Result<Vec<f64>, FemError> {
         let mut values = self
             .cache
             .as_ref()
@@ -143,7 +151,9 @@ impl SymmetricSolver {
         }
         let out: Vec<f64> = (0..n).map(|i| x[(i, 0)]).collect();
         if out.iter().any(|v| !v.is_finite()) {
-            return Err(FemError::LinearSolver("non-finite solution (singular tangent)".into()));
+            return Err(FemError::LinearSolver(
+                "non-finite solution (singular tangent)".into(),
+            ));
         }
         Ok(out)
     }

@@ -17,6 +17,9 @@
 //! With `mu = E / (2 (1 + nu))` and `kappa = E / (3 (1 - 2 nu))` both reduce to Hooke's law
 //! with (E, nu) at small strain.
 
+// Index loops mirror the tensor-index equations of the numerical kernels.
+#![allow(clippy::needless_range_loop)]
+
 pub use crate::curve::MaterialLaw;
 
 /// Index pairs (i, J) of the 5 non-zero components of the axisymmetric F.

@@ -9,6 +9,9 @@
 //! - Sample: a rectangle r in [0, R_s], z in [z_top - T, z_top], uniform near the axis and the
 //!   top surface (the contact zone) and geometrically graded away from it.
 
+// Index loops mirror the tensor-index equations of the numerical kernels.
+#![allow(clippy::needless_range_loop)]
+
 use crate::shape::q9;
 
 /// One Q9 element: global node numbers in tensor order (see [`crate::shape`]) and its body.

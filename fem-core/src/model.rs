@@ -6,6 +6,9 @@
 //! The residual is `R(u) = f_int(u) + f_contact(u) - p dV/dx(u)` and the tangent its exact
 //! derivative (see the element, pressure-load and contact modules).
 
+// Index loops mirror the tensor-index equations of the numerical kernels.
+#![allow(clippy::needless_range_loop)]
+
 use crate::FemError;
 use crate::contact::ContactPair;
 use crate::element::{self, ElementVector, Formulation};
@@ -50,7 +53,10 @@ impl std::fmt::Display for NewtonFailure {
             Self::NotConverged {
                 residual,
                 reference,
-            } => write!(f, "residual {residual:.3e} (reference force {reference:.3e})"),
+            } => write!(
+                f,
+                "residual {residual:.3e} (reference force {reference:.3e})"
+            ),
             Self::InvertedElement => write!(f, "an element inverted (det F <= 0)"),
             Self::Linear(e) => write!(f, "{e}"),
         }
@@ -235,9 +241,17 @@ impl Model {
                 // small-strain (linear) problems take the pressure as a dead load on the
                 // reference surface; finite-strain ones as a follower load
                 let x = if self.geometrically_linear() {
-                    [self.mesh.nodes[w[0]], self.mesh.nodes[w[1]], self.mesh.nodes[w[2]]]
+                    [
+                        self.mesh.nodes[w[0]],
+                        self.mesh.nodes[w[1]],
+                        self.mesh.nodes[w[2]],
+                    ]
                 } else {
-                    [self.position(u, w[0]), self.position(u, w[1]), self.position(u, w[2])]
+                    [
+                        self.position(u, w[0]),
+                        self.position(u, w[1]),
+                        self.position(u, w[2]),
+                    ]
                 };
                 let ev = edge_volume(&x);
                 let follower = !self.geometrically_linear();
@@ -344,18 +358,13 @@ impl Model {
             let r = self.restrict(&asm.residual);
             let norm = r.iter().map(|x| x * x).sum::<f64>().sqrt();
             let reference = asm.force_scale;
-            if std::env::var_os("FEM_TRACE").is_some() {
-                let (imax, _) = asm.residual.iter().enumerate().filter(|(d, _)| self.is_free(*d)).fold((0, 0.0), |(bi, bv), (i, v)| if v.abs() > bv { (i, v.abs()) } else { (bi, bv) });
-                let ncontact = self.contact.as_ref().map_or(0, |c| c.active_terms(&|n| self.position(u, n)).len());
-                eprintln!("  newton {it}: |R| = {norm:.3e} ref {reference:.3e} p = {p_kpa} maxdof {imax} at {:?} active {ncontact}", self.position(u, imax / 2));
-            }
             last = (norm, reference);
             if !norm.is_finite() {
                 break;
             }
-            let last_du = last_step
-                .as_ref()
-                .map_or(f64::INFINITY, |(_, du)| du.iter().fold(0.0, |m: f64, x| m.max(x.abs())));
+            let last_du = last_step.as_ref().map_or(f64::INFINITY, |(_, du)| {
+                du.iter().fold(0.0, |m: f64, x| m.max(x.abs()))
+            });
             // converged: small residual, or a round-off-level correction with a residual
             // that is still small (penalty stiffness limits the attainable residual)
             if norm <= self.newton.relative_tolerance * reference + self.newton.absolute_tolerance
@@ -365,8 +374,11 @@ impl Model {
                 return Ok(it);
             }
             // backtracking: if the last full step increased the residual, halve it
-            if let Some((prev_norm, du)) = &mut last_step {
-                if norm > *prev_norm && backtracks < 3 {
+            if let Some((prev_norm, du)) = &mut last_step
+                && norm > *prev_norm
+                && backtracks < 3
+            {
+                {
                     backtracks += 1;
                     for (d, e) in self.equation.iter().enumerate() {
                         if let Some(e) = e {

@@ -10,6 +10,9 @@
 //! the load stiffness `-p d2V/dx2` is symmetric (Bufler 1984; Simo, Taylor & Wriggers 1991).
 //! The integrand is a degree-5 polynomial in xi, so 3-point Gauss is exact.
 
+// Index loops mirror the tensor-index equations of the numerical kernels.
+#![allow(clippy::needless_range_loop)]
+
 use crate::shape::{GAUSS3_POINTS, GAUSS3_WEIGHTS, line3};
 use std::f64::consts::PI;
 

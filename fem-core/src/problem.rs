@@ -12,6 +12,9 @@
 //! `lambda / A - eps g` along the sample surface, linear interpolation between nodes), load P
 //! (total normal contact force), contact pressure profile and the enclosed inner volume.
 
+// Index loops mirror the tensor-index equations of the numerical kernels.
+#![allow(clippy::needless_range_loop)]
+
 use std::time::Instant;
 
 use crate::FemError;
@@ -118,7 +121,12 @@ fn check(field: &'static str, value: f64, ok: bool, reason: &'static str) -> Res
 
 /// Validate the model parameters.
 pub fn validate(p: &CurveParams) -> Result<(), FemError> {
-    check("sample_modulus_kpa", p.sample_modulus_kpa, p.sample_modulus_kpa > 0.0, "must be > 0")?;
+    check(
+        "sample_modulus_kpa",
+        p.sample_modulus_kpa,
+        p.sample_modulus_kpa > 0.0,
+        "must be > 0",
+    )?;
     check(
         "sample_poisson",
         p.sample_poisson,
@@ -131,15 +139,30 @@ pub fn validate(p: &CurveParams) -> Result<(), FemError> {
         p.sample_radius_mm >= SHELL_OUTER_RADIUS_MM + 1.0,
         "must be >= 6 mm (the shell's radius plus a margin)",
     )?;
-    check("sample_thickness_mm", p.sample_thickness_mm, p.sample_thickness_mm > 0.2, "must be > 0.2 mm")?;
-    check("shell_modulus_kpa", p.shell_modulus_kpa, p.shell_modulus_kpa > 0.0, "must be > 0")?;
+    check(
+        "sample_thickness_mm",
+        p.sample_thickness_mm,
+        p.sample_thickness_mm > 0.2,
+        "must be > 0.2 mm",
+    )?;
+    check(
+        "shell_modulus_kpa",
+        p.shell_modulus_kpa,
+        p.shell_modulus_kpa > 0.0,
+        "must be > 0",
+    )?;
     check(
         "shell_poisson",
         p.shell_poisson,
         (0.0..0.5).contains(&p.shell_poisson),
         "must be in [0, 0.5)",
     )?;
-    check("pressure_kpa", p.pressure_kpa, p.pressure_kpa >= 0.0, "must be >= 0 (gauge)")?;
+    check(
+        "pressure_kpa",
+        p.pressure_kpa,
+        p.pressure_kpa >= 0.0,
+        "must be >= 0 (gauge)",
+    )?;
     check("friction", p.friction, p.friction >= 0.0, "must be >= 0")?;
     check(
         "max_depth_mm",
@@ -147,8 +170,18 @@ pub fn validate(p: &CurveParams) -> Result<(), FemError> {
         (0.0..=3.0).contains(&p.max_depth_mm),
         "must be in [0, 3] mm",
     )?;
-    check("steps", p.steps as f64, p.steps >= 1 && p.steps <= 10_000, "must be in [1, 10000]")?;
-    check("mesh_level", f64::from(p.mesh_level), (-3..=3).contains(&p.mesh_level), "must be in [-3, 3]")?;
+    check(
+        "steps",
+        p.steps as f64,
+        p.steps >= 1 && p.steps <= 10_000,
+        "must be in [1, 10000]",
+    )?;
+    check(
+        "mesh_level",
+        f64::from(p.mesh_level),
+        (-3..=3).contains(&p.mesh_level),
+        "must be in [-3, 3]",
+    )?;
     if p.friction > 0.0 {
         return Err(FemError::Unsupported(
             "friction > 0: this solver version implements frictionless contact only",
@@ -172,7 +205,11 @@ pub struct Indentation {
 
 impl Indentation {
     /// Build the shell (and, if `sample_top_z_mm` is given, the sample and the contact pair).
-    pub fn build(params: &CurveParams, settings: &SolverSettings, sample_top_z_mm: Option<f64>) -> Self {
+    pub fn build(
+        params: &CurveParams,
+        settings: &SolverSettings,
+        sample_top_z_mm: Option<f64>,
+    ) -> Self {
         let mut mesh = Mesh::default();
         let shell = add_shell(
             &mut mesh,
@@ -203,8 +240,16 @@ impl Indentation {
             )
         });
         let materials = vec![
-            Material::from_young_poisson(params.shell_modulus_kpa, params.shell_poisson, params.material),
-            Material::from_young_poisson(params.sample_modulus_kpa, params.sample_poisson, params.material),
+            Material::from_young_poisson(
+                params.shell_modulus_kpa,
+                params.shell_poisson,
+                params.material,
+            ),
+            Material::from_young_poisson(
+                params.sample_modulus_kpa,
+                params.sample_poisson,
+                params.material,
+            ),
         ];
         let mut model = Model::new(mesh, materials, settings.formulation);
         let mut fixed: Vec<usize> = shell.axis.iter().map(|&n| 2 * n).collect();
@@ -234,10 +279,15 @@ impl Indentation {
                 settings.contact_smoothing * settings.mesh.sample_fine_size_mm,
             ));
         }
-        model.newton.max_correction_mm = settings.max_correction * settings.mesh.sample_fine_size_mm;
+        model.newton.max_correction_mm =
+            settings.max_correction * settings.mesh.sample_fine_size_mm;
         // round-off floor of the residual: stresses carry ~1e-16 relative error of the
         // stiffest modulus over ~mm^2 areas
-        let stiffest = model.materials.iter().map(|m| m.kappa_kpa).fold(0.0, f64::max);
+        let stiffest = model
+            .materials
+            .iter()
+            .map(|m| m.kappa_kpa)
+            .fold(0.0, f64::max);
         model.newton.absolute_tolerance = 1e-12 * stiffest;
         let clamp_z_dofs = shell.clamped.iter().map(|&n| 2 * n + 1).collect();
         Self {
@@ -294,7 +344,9 @@ impl Indentation {
             if contact.max_penetration(&pos) <= settings.penetration_tolerance_mm {
                 break;
             }
-            let pos_nodes: Vec<[f64; 2]> = (0..model.mesh.nodes.len()).map(|n| model.position(u, n)).collect();
+            let pos_nodes: Vec<[f64; 2]> = (0..model.mesh.nodes.len())
+                .map(|n| model.position(u, n))
+                .collect();
             if let Some(contact) = &mut self.model.contact {
                 contact.augment(&|n: usize| pos_nodes[n]);
             }
@@ -383,7 +435,8 @@ fn consistent_pressure(current: &[[f64; 2]], forces: &[f64], end: usize) -> Vec<
             let ds = (dr * dr + dz * dz).sqrt();
             for a in 0..3 {
                 for b in 0..3 {
-                    m[(2 * e + a, 2 * e + b)] += w * nf[a] * nf[b] * 2.0 * std::f64::consts::PI * r * ds;
+                    m[(2 * e + a, 2 * e + b)] +=
+                        w * nf[a] * nf[b] * 2.0 * std::f64::consts::PI * r * ds;
                 }
             }
         }
@@ -410,9 +463,13 @@ fn contact_edge_mm(current: &[[f64; 2]], gaps: &[Option<f64>], indicator: &[f64]
         return r(k);
     }
     let (lo, hi) = (r(k), r(k + 1));
-    if k + 2 < current.len() {
-        if let (Some(g1), Some(g2)) = (gaps[k + 1], gaps[k + 2]) {
-            if g1 > 0.0 && g2 > g1 {
+    if k + 2 < current.len()
+        && let (Some(g1), Some(g2)) = (gaps[k + 1], gaps[k + 2])
+        && g1 > 0.0
+        && g2 > g1
+    {
+        {
+            {
                 let (s1, s2) = (g1.powf(2.0 / 3.0), g2.powf(2.0 / 3.0));
                 let a = r(k + 1) - s1 * (r(k + 2) - r(k + 1)) / (s2 - s1);
                 if a.is_finite() {
@@ -428,6 +485,7 @@ fn contact_edge_mm(current: &[[f64; 2]], gaps: &[Option<f64>], indicator: &[f64]
 
 /// Drive `solve(target, state)` from `from` to `to` in increments starting at `increment`,
 /// halving on failure (at most `max_cuts` times in a row) and growing back after success.
+#[allow(clippy::too_many_arguments)] // a private driver; the call sites name every argument
 fn continuation(
     from: f64,
     to: f64,
@@ -481,7 +539,19 @@ pub fn solve_curve(params: &CurveParams) -> Result<Curve, FemError> {
 /// Solve one a–u_s curve with explicit solver settings.
 ///
 /// faer's global parallelism is set to sequential: curves are parallelised by the caller.
-pub fn solve_curve_with(params: &CurveParams, settings: &SolverSettings) -> Result<Curve, FemError> {
+pub fn solve_curve_with(
+    params: &CurveParams,
+    settings: &SolverSettings,
+) -> Result<Curve, FemError> {
+    solve_curve_state(params, settings).map(|(curve, _, _)| curve)
+}
+
+/// Like [`solve_curve_with`], also returning the stage-2 model and its final displacement
+/// state (for benchmarks and diagnostics).
+pub fn solve_curve_state(
+    params: &CurveParams,
+    settings: &SolverSettings,
+) -> Result<(Curve, Indentation, Vec<f64>), FemError> {
     validate(params)?;
     faer::set_global_parallelism(faer::Par::Seq);
     let started = Instant::now();
@@ -531,10 +601,16 @@ pub fn solve_curve_with(params: &CurveParams, settings: &SolverSettings) -> Resu
             dh,
             settings.max_cuts,
             &mut state,
-            |h, s| ind_cell.borrow_mut().solve_step(s, h, params.pressure_kpa, settings),
+            |h, s| {
+                ind_cell
+                    .borrow_mut()
+                    .solve_step(s, h, params.pressure_kpa, settings)
+            },
             || {
                 let mut ind = ind_cell.borrow_mut();
-                if let (Some(c), Some(saved)) = (ind.model.contact.as_mut(), committed.borrow().as_ref()) {
+                if let (Some(c), Some(saved)) =
+                    (ind.model.contact.as_mut(), committed.borrow().as_ref())
+                {
                     c.multipliers.clone_from(saved);
                 }
             },
@@ -549,23 +625,13 @@ pub fn solve_curve_with(params: &CurveParams, settings: &SolverSettings) -> Resu
         )?;
         points.push(ind.curve_point(&state, h_to, apex_z0_mm));
     }
-    if std::env::var_os("FEM_TIMING").is_some() {
-        eprintln!(
-            "dofs {} newton {} (+{} stage 1) assembly {:.2} s solve {:.2} s symbolic {}",
-            ind.model.n_equations(),
-            ind.model.newton_iterations,
-            stage1.model.newton_iterations,
-            ind.model.assembly_seconds,
-            ind.model.solve_seconds,
-            ind.model.solver_symbolic_analyses()
-        );
-    }
-    Ok(Curve {
+    let curve = Curve {
         params: params.clone(),
         rest_volume_mm3,
         inflated_volume_mm3,
         inflation_apex_mm,
         points,
         solve_seconds: started.elapsed().as_secs_f64(),
-    })
+    };
+    Ok((curve, ind, state))
 }

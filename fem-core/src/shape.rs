@@ -4,6 +4,9 @@
 //! Node numbering of a Q9 element is tensor-product: local node `3 * j + i` sits at
 //! parent coordinates (xi_i, eta_j) with xi, eta in {-1, 0, 1}.
 
+// Index loops mirror the tensor-index equations of the numerical kernels.
+#![allow(clippy::needless_range_loop)]
+
 /// 3-point Gauss–Legendre abscissae on [-1, 1] (exact for polynomials of degree 5).
 pub const GAUSS3_POINTS: [f64; 3] = [-0.774_596_669_241_483_4, 0.0, 0.774_596_669_241_483_4];
 /// Weights of [`GAUSS3_POINTS`].

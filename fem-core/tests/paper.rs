@@ -1,6 +1,9 @@
 //! The paper's qualitative results (Gubenko et al., "Finite element model" and "Results"
 //! sections, Figs. 6, 8, 9) on a coarse mesh, plus the rigid-sample limit.
 
+// Test helpers outside #[test] functions unwrap solver results too.
+#![allow(clippy::unwrap_used)]
+
 use fem_core::{Curve, CurveParams, solve_curve};
 
 fn curve(e2_kpa: f64, p_air_kpa: f64, depth_mm: f64, steps: usize) -> Curve {
@@ -18,9 +21,13 @@ fn curve(e2_kpa: f64, p_air_kpa: f64, depth_mm: f64, steps: usize) -> Curve {
 /// (r at the pressure maximum, maximum, pressure at the axis) of a profile.
 fn profile_shape(c: &Curve) -> (f64, f64, f64) {
     let p = &c.points[c.points.len() - 1].contact_pressure;
-    let (r_max, p_max) = p
-        .iter()
-        .fold((0.0, 0.0), |(r, m), s| if s.pressure_kpa > m { (s.r_mm, s.pressure_kpa) } else { (r, m) });
+    let (r_max, p_max) = p.iter().fold((0.0, 0.0), |(r, m), s| {
+        if s.pressure_kpa > m {
+            (s.r_mm, s.pressure_kpa)
+        } else {
+            (r, m)
+        }
+    });
     (r_max, p_max, p[0].pressure_kpa)
 }
 
@@ -29,7 +36,10 @@ fn gelatin_curve_matches_the_papers_observations() {
     // E2 = 200 kPa (middle of the paper's 140-260 kPa family), p_air = 6 kPa
     let deep = curve(200.0, 6.0, 1.7, 17);
     let last = &deep.points[17];
-    println!("h = 1.7: u_s = {:.4} mm, a = {:.4} mm, P = {:.4} N", last.u_s_mm, last.a_mm, last.load_n);
+    println!(
+        "h = 1.7: u_s = {:.4} mm, a = {:.4} mm, P = {:.4} N",
+        last.u_s_mm, last.a_mm, last.load_n
+    );
     // "the maximum contact area radius is about 3.5 mm"
     assert!((3.1..3.9).contains(&last.a_mm), "a = {}", last.a_mm);
     // a, u_s and P grow monotonically; u_s < h (the head deforms)
@@ -49,7 +59,9 @@ fn gelatin_curve_matches_the_papers_observations() {
     let shallow = curve(200.0, 6.0, 0.15, 3);
     let a = shallow.points[3].a_mm;
     let (r_max, p_max, p_axis) = profile_shape(&shallow);
-    println!("h = 0.15: a = {a:.3} mm, max {p_max:.2} kPa at r = {r_max:.3} mm, axis {p_axis:.2} kPa");
+    println!(
+        "h = 0.15: a = {a:.3} mm, max {p_max:.2} kPa at r = {r_max:.3} mm, axis {p_axis:.2} kPa"
+    );
     assert!(r_max < 0.5 * a, "peak at {r_max}");
 
     // Fig. 8: higher p_air gives higher contact pressure at h = 1.7 mm
@@ -85,7 +97,11 @@ fn very_stiff_sample_behaves_as_rigid() {
             p.h_mm, p.u_s_mm, p.a_mm, p.load_n, s.u_s_mm
         );
         // wall-thickness change is a few % of the 0.4 mm wall at most
-        assert!((p.u_s_mm - p.h_mm).abs() < 0.05 * p.h_mm, "u_s {}", p.u_s_mm);
+        assert!(
+            (p.u_s_mm - p.h_mm).abs() < 0.05 * p.h_mm,
+            "u_s {}",
+            p.u_s_mm
+        );
         assert!((p.u_s_mm - p.h_mm).abs() > 1e-5, "u_s exactly h");
         // a soft sample takes up part of the travel
         assert!(s.u_s_mm < 0.8 * p.u_s_mm);

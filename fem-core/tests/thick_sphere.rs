@@ -2,6 +2,9 @@
 //! sphere (a = 4.6 mm, b = 5 mm: the sensor's wall), modelled as a hemisphere with symmetry
 //! conditions on the equator plane.
 
+// Test helpers outside #[test] functions unwrap solver results too.
+#![allow(clippy::unwrap_used)]
+
 use fem_core::element::Formulation;
 use fem_core::material::{Material, MaterialLaw};
 use fem_core::mesh::{Mesh, ShellDivisions, ShellGeometry, add_shell};
@@ -63,7 +66,14 @@ const COARSE: ShellDivisions = ShellDivisions {
 fn lame_thick_sphere_small_strain() {
     // Lamé: u(r) = p a^3 / (E (b^3 - a^3)) [ (1 - 2 nu) r + (1 + nu) b^3 / (2 r^2) ]
     // a = 4.6, b = 5, E = 2300 kPa, nu = 0.49, p = 15 kPa: 103.100 um and 87.772 um.
-    let (ui, uo) = inflate_sphere(MaterialLaw::Linear, 0.49, 15.0, COARSE, Formulation::Mixed, 1);
+    let (ui, uo) = inflate_sphere(
+        MaterialLaw::Linear,
+        0.49,
+        15.0,
+        COARSE,
+        Formulation::Mixed,
+        1,
+    );
     let (a, b, e, nu, p): (f64, f64, f64, f64, f64) = (4.6, 5.0, 2300.0, 0.49, 15.0);
     let lame = |r: f64| {
         p * a.powi(3) / (e * (b.powi(3) - a.powi(3)))
@@ -71,7 +81,11 @@ fn lame_thick_sphere_small_strain() {
     };
     assert!((lame(a) * 1e3 - 103.100).abs() < 1e-3);
     assert!((lame(b) * 1e3 - 87.772).abs() < 1e-3);
-    println!("Lame: inner {:.4} um (exact 103.100), outer {:.4} um (exact 87.772)", ui * 1e3, uo * 1e3);
+    println!(
+        "Lame: inner {:.4} um (exact 103.100), outer {:.4} um (exact 87.772)",
+        ui * 1e3,
+        uo * 1e3
+    );
     // issue tolerance 0.5 %
     assert!((ui / lame(a) - 1.0).abs() < 5e-3, "inner {ui}");
     assert!((uo / lame(b) - 1.0).abs() < 5e-3, "outer {uo}");
@@ -91,7 +105,10 @@ fn incompressible_neo_hookean_sphere_inflation() {
             Formulation::Mixed,
             steps,
         );
-        println!("neo-Hookean sphere p = {p} kPa: inner {:.3} um (exact {exact_um})", ui * 1e3);
+        println!(
+            "neo-Hookean sphere p = {p} kPa: inner {:.3} um (exact {exact_um})",
+            ui * 1e3
+        );
         assert!((ui * 1e3 / exact_um - 1.0).abs() < 1e-2, "p = {p}: {ui}");
     }
 }
@@ -123,7 +140,10 @@ fn exact_incompressible_reference_values() {
     };
     for (p, du_um) in [(6.0, 42.134), (15.0, 111.570), (50.0, 505.189)] {
         let got = pressure_for(du_um * 1e-3);
-        assert!((got / p - 1.0).abs() < 1e-4, "p({du_um} um) = {got}, expected {p}");
+        assert!(
+            (got / p - 1.0).abs() < 1e-4,
+            "p({du_um} um) = {got}, expected {p}"
+        );
     }
 }
 
@@ -152,8 +172,14 @@ fn clamped_shell_bending_does_not_lock_with_the_mixed_element() {
         ind.model.solve_equilibrium(&mut u, 6.0).unwrap();
         -u[2 * ind.shell.inner_apex + 1]
     };
-    let mixed = (run(0.49, Formulation::Mixed), run(0.4999, Formulation::Mixed));
-    let displ = (run(0.49, Formulation::Displacement), run(0.4999, Formulation::Displacement));
+    let mixed = (
+        run(0.49, Formulation::Mixed),
+        run(0.4999, Formulation::Mixed),
+    );
+    let displ = (
+        run(0.49, Formulation::Displacement),
+        run(0.4999, Formulation::Displacement),
+    );
     let mixed_limit = run(0.499999, Formulation::Mixed);
     let displ_limit = run(0.499999, Formulation::Displacement);
     println!(
@@ -168,11 +194,17 @@ fn clamped_shell_bending_does_not_lock_with_the_mixed_element() {
     );
     // the physical effect of nu 0.49 -> 0.4999 is ~1 % (thick-sphere Lame estimate 0.99)
     let ratio_mixed = mixed.1 / mixed.0;
-    assert!((ratio_mixed - 0.99).abs() < 0.01, "mixed ratio {ratio_mixed}");
+    assert!(
+        (ratio_mixed - 0.99).abs() < 0.01,
+        "mixed ratio {ratio_mixed}"
+    );
     // no locking: a 100x larger bulk modulus changes the mixed answer by < 0.1 %
     assert!((mixed_limit / mixed.1 - 1.0).abs() < 1e-3);
     // control (shows the test detects locking): the pure-displacement Q9 keeps stiffening
     // (measured 0.961) and is stiffer than the mixed element at nu = 0.4999
-    assert!(displ_limit / displ.1 < 0.98, "displacement element did not lock");
+    assert!(
+        displ_limit / displ.1 < 0.98,
+        "displacement element did not lock"
+    );
     assert!(displ.1 < mixed.1 * 0.99);
 }
