@@ -375,7 +375,7 @@ impl Model {
             }
             // backtracking: if the last full step increased the residual, halve it
             if let Some((prev_norm, du)) = &mut last_step
-                && norm > *prev_norm
+                && norm > 2.0 * *prev_norm
                 && backtracks < 3
             {
                 {
