@@ -31,10 +31,13 @@ pub struct ContactRadiusConfig {
     pub detect_sigma: f64,
     /// Smallest contact radius reported; smaller blobs are "no contact".
     pub min_radius_px: f64,
-    /// Half width of the band around the edge summed for the area (covers the blur: the
-    /// edge profile of a Gaussian blur of sigma 2.5 px is within 7e-4 of a step at 9 px).
+    /// Half width of the band around the edge summed for the area. It must cover the blur:
+    /// the area lost in the tails beyond 8 px of a sigma = 2.5 px edge is ~0.002 px of
+    /// radius. Wider bands add noise: every band pixel carries the pixel noise, and the
+    /// band's f ~ 1 half scales with any error of the fitted contact level.
     pub band_half_width_px: f64,
-    /// Width of the rings inside and outside the band where the levels are fitted.
+    /// Width of the rings inside and outside the band where the levels are fitted (wide,
+    /// because the level error is multiplied by the band's pixel count).
     pub level_ring_px: f64,
     /// Angular sectors for the edge points of the ellipse fit.
     pub sectors: usize,
@@ -52,8 +55,8 @@ impl Default for ContactRadiusConfig {
         Self {
             detect_sigma: 5.0,
             min_radius_px: 10.0,
-            band_half_width_px: 9.0,
-            level_ring_px: 5.0,
+            band_half_width_px: 8.0,
+            level_ring_px: 12.0,
             sectors: 32,
             saturation_level: 250,
             mirror_ratio: 1.6,
@@ -84,6 +87,8 @@ pub struct ContactDisc {
     pub fit_rms_px: f64,
     /// True when the disc's band runs off the image (radius from the visible sectors).
     pub clipped: bool,
+    /// Band passes used (a second one when the first edge model was more than 2 px off).
+    pub passes: usize,
 }
 
 /// Result for one frame. `quality` is 0 without contact, else in (0, 1]:
@@ -129,21 +134,32 @@ impl Blocks {
         let mut sum = vec![0u32; bw * bh];
         let mut max = vec![0u8; bw * bh];
         let px = img.pixels();
+        // Column sums and maxima over the block's rows first (contiguous, vectorisable),
+        // then per block across its columns.
+        let mut col_sum = vec![0u16; bw * BLOCK];
+        let mut col_max = vec![0u8; bw * BLOCK];
         for by in 0..bh {
+            col_sum.fill(0);
+            col_max.fill(0);
+            for r in 0..BLOCK {
+                let row = &px[(by * BLOCK + r) * w..][..bw * BLOCK];
+                for ((s, m), &v) in col_sum.iter_mut().zip(col_max.iter_mut()).zip(row) {
+                    *s += u16::from(v);
+                    *m = (*m).max(v);
+                }
+            }
             let (s_row, m_row) = (
                 &mut sum[by * bw..(by + 1) * bw],
                 &mut max[by * bw..(by + 1) * bw],
             );
-            for r in 0..BLOCK {
-                let row = &px[(by * BLOCK + r) * w..][..bw * BLOCK];
-                for ((chunk, s), m) in row
-                    .chunks_exact(BLOCK)
-                    .zip(s_row.iter_mut())
-                    .zip(m_row.iter_mut())
-                {
-                    *s += chunk.iter().map(|&v| u32::from(v)).sum::<u32>();
-                    *m = chunk.iter().fold(*m, |a, &v| a.max(v));
-                }
+            for (((s, m), cs), cm) in s_row
+                .iter_mut()
+                .zip(m_row.iter_mut())
+                .zip(col_sum.chunks_exact(BLOCK))
+                .zip(col_max.chunks_exact(BLOCK))
+            {
+                *s = cs.iter().map(|&v| u32::from(v)).sum();
+                *m = cm.iter().copied().fold(0, u8::max);
             }
         }
         Self { bw, bh, sum, max }
@@ -157,6 +173,9 @@ pub struct ContactRadiusEstimator {
     blocks: Blocks,
     /// Pixels of the reference at or above this level are the mirror.
     mirror_level: f64,
+    /// The mirror's disc with a margin for its soft rim (centre, radius^2), if any:
+    /// masked so its halo does not leak into the fitted levels.
+    mirror_disc: Option<([f64; 2], f64)>,
     config: ContactRadiusConfig,
 }
 
@@ -218,7 +237,13 @@ fn fit_plane(samples: &[[f64; 3]]) -> Option<([f64; 3], f64)> {
     };
     let p = lsq(&|_| true)?;
     let eval = |p: &[f64; 3], s: &[f64; 3]| s[2] - (p[0] + p[1] * s[0] + p[2] * s[1]);
-    let mut res: Vec<f64> = samples.iter().map(|s| eval(&p, s)).collect();
+    // Robust scale from at most ~2000 residuals.
+    let stride = (samples.len() / 2000).max(1);
+    let mut res: Vec<f64> = samples
+        .iter()
+        .step_by(stride)
+        .map(|s| eval(&p, s))
+        .collect();
     let sigma = robust_sigma(&mut res, 0.0).max(1e-9);
     let p2 = lsq(&|s| eval(&p, s).abs() <= 4.0 * sigma).unwrap_or(p);
     Some((p2, sigma))
@@ -259,10 +284,15 @@ impl ContactRadiusEstimator {
             .map(|(s, _)| f64::from(*s) / (BLOCK * BLOCK) as f64)
             .collect();
         let mirror_level = config.mirror_ratio * median(&mut means).max(1.0);
+        let mirror_disc = mirror_disc(
+            &reference,
+            mirror_level.min(f64::from(config.saturation_level)),
+        );
         Ok(Self {
             reference,
             blocks,
             mirror_level,
+            mirror_disc,
             config,
         })
     }
@@ -296,7 +326,12 @@ impl ContactRadiusEstimator {
         };
         let mut model = Ellipse::circle(coarse.center, coarse.radius);
         let mut last: Option<(BandPass, Ellipse)> = None;
-        for pass in 0..3 {
+        // The band sum is exact while the true edge lies well inside the band (its blur
+        // tail beyond 7 px of a 2.5 px blur holds < 1e-3 px of radius), so another pass
+        // around the fitted shape is needed only when the shape moved by more than 2 px.
+        let mut passes = 0;
+        for _pass in 0..3 {
+            passes += 1;
             let Some(band) = self.band_pass(frame, &model) else {
                 break;
             };
@@ -307,12 +342,10 @@ impl ContactRadiusEstimator {
             };
             let shape = fitted.unwrap_or(model);
             let next = shape.scaled_to_radius(band.radius);
-            let shift = ((next.center_px[0] - model.center_px[0]).powi(2)
-                + (next.center_px[1] - model.center_px[1]).powi(2))
-            .sqrt();
+            let moved = max_edge_distance(&next, &model);
             model = next;
             last = Some((band, next));
-            if pass >= 1 && shift < 1.0 {
+            if moved < 2.0 {
                 break;
             }
         }
@@ -343,6 +376,7 @@ impl ContactRadiusEstimator {
                 edge_snr: band.edge_snr,
                 fit_rms_px: fit_rms,
                 clipped: band.visible_fraction < 1.0,
+                passes,
             }),
         })
     }
@@ -368,8 +402,11 @@ impl ContactRadiusEstimator {
         if valid_vals.len() < 16 {
             return None;
         }
-        let med = median(&mut valid_vals);
-        let sigma = robust_sigma(&mut valid_vals, med).max(1e-6);
+        // Median and MAD from every third valid block (thousands of samples: plenty for a
+        // robust location and scale, a third of the selection cost).
+        let mut sample: Vec<f64> = valid_vals.iter().step_by(3).copied().collect();
+        let med = median(&mut sample);
+        let sigma = robust_sigma(&mut sample, med).max(1e-6);
         let thr = cfg.detect_sigma * sigma;
         let (mut pos, mut neg) = (Vec::new(), Vec::new());
         for v in n.iter().filter(|v| v.is_finite()) {
@@ -398,19 +435,21 @@ impl ContactRadiusEstimator {
         if (component.len() as f64) < min_blocks {
             return None;
         }
-        let mut in_comp = vec![false; bw * bh];
-        for &i in &component {
-            in_comp[i] = true;
+        // Fill holes (the mirror, saturated blocks) row by row: a contact disc is convex, so
+        // every block between a row's first and last component block is inside.
+        let mut row_span = vec![(u16::MAX, 0u16); bh];
+        for &(x, y) in &component {
+            let span = &mut row_span[usize::from(y)];
+            span.0 = span.0.min(x);
+            span.1 = span.1.max(x);
         }
-        // Fill holes (the mirror, saturated blocks): everything not reachable from the
-        // border without crossing the component.
-        let outside = reachable_from_border(&in_comp, bw, bh);
         let (mut cnt, mut sx, mut sy) = (0.0, 0.0, 0.0);
-        for (i, &out) in outside.iter().enumerate() {
-            if !out {
-                cnt += 1.0;
-                sx += (i % bw) as f64;
-                sy += (i / bw) as f64;
+        for (y, &(lo, hi)) in row_span.iter().enumerate() {
+            if lo <= hi {
+                let k = f64::from(hi - lo + 1);
+                cnt += k;
+                sx += k * 0.5 * (f64::from(lo) + f64::from(hi));
+                sy += k * y as f64;
             }
         }
         let b = BLOCK as f64;
@@ -435,9 +474,10 @@ impl ContactRadiusEstimator {
         let r_lo = (model.semi_minor_px - w - ring).max(0.0);
         let r_hi = model.semi_major_px + w + ring;
         let sectors = cfg.sectors.max(8);
+        let per_rad = sectors as f64 / std::f64::consts::TAU;
         let sector_of = |dx: f64, dy: f64| -> usize {
-            let t = (fast_atan2(dy, dx) + std::f64::consts::PI) / std::f64::consts::TAU;
-            ((t * sectors as f64) as usize).min(sectors - 1)
+            let t = (fast_atan2(dy, dx) + std::f64::consts::PI) * per_rad;
+            (t as usize).min(sectors - 1)
         };
         let (sin_a, cos_a) = model.angle_rad.sin_cos();
         let (ia, ib) = (1.0 / model.semi_major_px, 1.0 / model.semi_minor_px);
@@ -465,8 +505,12 @@ impl ContactRadiusEstimator {
         let mut n_inner = 0.0f64;
         let mut inner_ring: Vec<[f64; 3]> = Vec::new();
         let mut outer_ring: Vec<[f64; 3]> = Vec::new();
-        // band samples: dx, dy, n (NaN if masked), s, sector
-        let mut band: Vec<(f64, f64, f64, f64, usize)> = Vec::new();
+        // Band samples: dx, dy, n (NaN if masked), s, sector; f32 keeps the buffer small.
+        let perimeter = std::f64::consts::TAU * model.semi_major_px;
+        let mut band: Vec<([f32; 4], u16)> =
+            Vec::with_capacity((perimeter * (2.0 * w + 2.0)) as usize);
+        inner_ring.reserve((perimeter * (ring + 1.0)) as usize);
+        outer_ring.reserve((perimeter * (ring + 1.0)) as usize);
         let mut sector_clipped = vec![false; sectors];
         let scale = 1.0 / r_hi.max(1.0);
         let y0 = (cy - r_hi).floor() as i64;
@@ -493,10 +537,12 @@ impl ContactRadiusEstimator {
                     n_inner += (cb - ca + 1) as f64;
                 }
             }
-            for xi in xa..=xb {
-                if hole.is_some_and(|(ha, hb)| xi >= ha && xi <= hb) {
-                    continue;
-                }
+            // The annulus row: one x range, or two around the hole.
+            let ranges = match hole {
+                Some((ha, hb)) if hb >= ha => [(xa, ha - 1), (hb + 1, xb)],
+                _ => [(xa, xb), (1, 0)],
+            };
+            for xi in ranges.into_iter().flat_map(|(a, b)| a..=b) {
                 let dx = xi as f64 - cx;
                 let s = signed(dx, dy);
                 if s > w + ring {
@@ -515,7 +561,10 @@ impl ContactRadiusEstimator {
                 }
                 let idx = yi as usize * w_img + xi as usize;
                 let (iv, rv) = (f64::from(fpx[idx]), f64::from(rpx[idx]));
-                let masked = iv >= sat || rv >= sat || rv >= self.mirror_level;
+                let in_mirror = self.mirror_disc.is_some_and(|(mc, r2)| {
+                    (xi as f64 - mc[0]).powi(2) + (yi as f64 - mc[1]).powi(2) < r2
+                });
+                let masked = iv >= sat || rv >= sat || rv >= self.mirror_level || in_mirror;
                 let nv = if masked {
                     f64::NAN
                 } else {
@@ -527,7 +576,10 @@ impl ContactRadiusEstimator {
                         inner_ring.push([dx * scale, dy * scale, nv]);
                     }
                 } else if s <= w {
-                    band.push((dx, dy, nv, s, sector_of(dx, dy)));
+                    band.push((
+                        [dx as f32, dy as f32, nv as f32, s as f32],
+                        sector_of(dx, dy) as u16,
+                    ));
                 } else if !masked {
                     outer_ring.push([dx * scale, dy * scale, nv]);
                 }
@@ -545,7 +597,15 @@ impl ContactRadiusEstimator {
         let mut sector_count = vec![0usize; sectors];
         let mut band_sum = 0.0;
         let mut band_var = 0.0;
-        for &(dx, dy, nv, s, sec) in &band {
+        let (mut sum_f, mut sum_1mf, mut inv_d2) = (0.0, 0.0, 0.0);
+        for &([dx, dy, nv, s], sec) in &band {
+            let (dx, dy, nv, s, sec) = (
+                f64::from(dx),
+                f64::from(dy),
+                f64::from(nv),
+                f64::from(s),
+                usize::from(sec),
+            );
             let f = if nv.is_nan() {
                 if s < 0.0 { 1.0 } else { 0.0 }
             } else {
@@ -555,7 +615,11 @@ impl ContactRadiusEstimator {
                     if s < 0.0 { 1.0 } else { 0.0 }
                 } else {
                     band_var += (noise / d).powi(2);
-                    (nv - lo) / d
+                    let f = (nv - lo) / d;
+                    sum_f += f;
+                    sum_1mf += 1.0 - f;
+                    inv_d2 += 1.0 / (d * d);
+                    f
                 }
             };
             band_sum += f;
@@ -590,7 +654,18 @@ impl ContactRadiusEstimator {
             return None;
         }
         let radius = (area / std::f64::consts::PI).sqrt();
-        let radius_sigma = band_var.sqrt() / (std::f64::consts::TAU * radius);
+        // Pixel noise of the band plus the error of the fitted levels, which shifts every
+        // band pixel's f at once: dA = -(sum f) e_in / D - (sum (1 - f)) e_out / D with
+        // e ~ sigma / sqrt(N_ring) (the ring means).
+        let mean_inv_d2 = if band.is_empty() {
+            0.0
+        } else {
+            inv_d2 / band.len() as f64
+        };
+        let level_var = mean_inv_d2
+            * (sum_f.powi(2) * sig_in.powi(2) / inner_ring.len().max(1) as f64
+                + sum_1mf.powi(2) * sig_out.powi(2) / outer_ring.len().max(1) as f64);
+        let radius_sigma = (band_var + level_var).sqrt() / (std::f64::consts::TAU * radius);
         let mean_count = band.len() as f64 / sectors as f64;
         let point_sigma = (noise / contrast.abs()) * mean_count.sqrt() / (radius * dtheta);
         Some(BandPass {
@@ -603,6 +678,44 @@ impl ContactRadiusEstimator {
             visible_fraction,
         })
     }
+}
+
+/// The bright apex mirror in the reference: centroid and radius of the pixels at or above
+/// `level`, plus 4 px for the soft rim (a 1-px blurred rim thresholded at a third of its
+/// height falls below 1e-4 of its height 4 px further out). `None` if there is no such spot
+/// or it is not compact (more than 5 % of the frame: not a mirror).
+fn mirror_disc(reference: &GrayImage, level: f64) -> Option<([f64; 2], f64)> {
+    let w = reference.width();
+    let (mut n, mut sx, mut sy) = (0usize, 0.0, 0.0);
+    for (i, &v) in reference.pixels().iter().enumerate() {
+        if f64::from(v) >= level {
+            n += 1;
+            sx += (i % w) as f64;
+            sy += (i / w) as f64;
+        }
+    }
+    if n == 0 || n * 20 > reference.pixels().len() {
+        return None;
+    }
+    let c = [sx / n as f64, sy / n as f64];
+    // Radius of the equal-area disc: robust to a few stray bright pixels.
+    let r = (n as f64 / std::f64::consts::PI).sqrt() + 4.0;
+    Some((c, r * r))
+}
+
+/// Largest distance (px) between the boundaries of two ellipses, sampled along 32 rays
+/// from the centre of `b` (distance measured along the ray).
+fn max_edge_distance(a: &Ellipse, b: &Ellipse) -> f64 {
+    (0..32)
+        .map(|i| {
+            let t = i as f64 * std::f64::consts::TAU / 32.0;
+            let (st, ct) = t.sin_cos();
+            let ra = a.polar_radius_px(ct, st);
+            let (px, py) = (a.center_px[0] + ra * ct, a.center_px[1] + ra * st);
+            let (dx, dy) = (px - b.center_px[0], py - b.center_px[1]);
+            ((dx * dx + dy * dy).sqrt() - b.polar_radius_px(dx, dy)).abs()
+        })
+        .fold(0.0, f64::max)
 }
 
 fn rms_about(points: &[[f64; 2]], e: &Ellipse) -> f64 {
@@ -619,78 +732,40 @@ fn rms_about(points: &[[f64; 2]], e: &Ellipse) -> f64 {
     (ss / points.len() as f64).sqrt()
 }
 
-fn largest_component(mask: &[bool], bw: usize, bh: usize) -> Vec<usize> {
-    let mut seen = vec![false; mask.len()];
-    let mut best = Vec::new();
-    let mut stack = Vec::new();
-    for start in 0..mask.len() {
-        if !mask[start] || seen[start] {
+/// The largest 4-connected set of `mask` blocks, as (x, y) block coordinates.
+fn largest_component(mask: &[bool], bw: usize, bh: usize) -> Vec<(u16, u16)> {
+    // A one-block border of `false` avoids bounds checks and index arithmetic per step.
+    let pw = bw + 2;
+    let mut open = vec![false; pw * (bh + 2)];
+    for y in 0..bh {
+        open[(y + 1) * pw + 1..(y + 1) * pw + 1 + bw].copy_from_slice(&mask[y * bw..(y + 1) * bw]);
+    }
+    let mut best: Vec<usize> = Vec::new();
+    let mut comp: Vec<usize> = Vec::new();
+    let mut stack: Vec<usize> = Vec::new();
+    for start in 0..open.len() {
+        if !open[start] {
             continue;
         }
-        let mut comp = Vec::new();
-        seen[start] = true;
+        comp.clear();
+        open[start] = false;
         stack.push(start);
         while let Some(i) = stack.pop() {
             comp.push(i);
-            let (x, y) = (i % bw, i / bw);
-            let mut visit = |j: usize| {
-                if mask[j] && !seen[j] {
-                    seen[j] = true;
+            for j in [i - 1, i + 1, i - pw, i + pw] {
+                if open[j] {
+                    open[j] = false;
                     stack.push(j);
                 }
-            };
-            if x > 0 {
-                visit(i - 1);
-            }
-            if x + 1 < bw {
-                visit(i + 1);
-            }
-            if y > 0 {
-                visit(i - bw);
-            }
-            if y + 1 < bh {
-                visit(i + bw);
             }
         }
         if comp.len() > best.len() {
-            best = comp;
+            std::mem::swap(&mut best, &mut comp);
         }
     }
-    best
-}
-
-fn reachable_from_border(blocked: &[bool], bw: usize, bh: usize) -> Vec<bool> {
-    let mut seen = vec![false; blocked.len()];
-    let mut stack: Vec<usize> = Vec::new();
-    for i in 0..blocked.len() {
-        let (x, y) = (i % bw, i / bw);
-        if (x == 0 || y == 0 || x + 1 == bw || y + 1 == bh) && !blocked[i] {
-            seen[i] = true;
-            stack.push(i);
-        }
-    }
-    while let Some(i) = stack.pop() {
-        let (x, y) = (i % bw, i / bw);
-        let mut visit = |j: usize| {
-            if !blocked[j] && !seen[j] {
-                seen[j] = true;
-                stack.push(j);
-            }
-        };
-        if x > 0 {
-            visit(i - 1);
-        }
-        if x + 1 < bw {
-            visit(i + 1);
-        }
-        if y > 0 {
-            visit(i - bw);
-        }
-        if y + 1 < bh {
-            visit(i + bw);
-        }
-    }
-    seen
+    best.iter()
+        .map(|&i| (((i % pw) - 1) as u16, ((i / pw) - 1) as u16))
+        .collect()
 }
 
 /// One-shot convenience: prepares `reference` and measures `frame`.
