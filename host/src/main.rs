@@ -27,6 +27,8 @@ enum Command {
     Fem(cli::fem::FemArgs),
     /// Fit the sample's Young's modulus to a measured a–u_s curve.
     Fit(cli::fit::FitArgs),
+    /// The whole measurement against the emulated bench: calibrate, measure, fit, record.
+    Demo(cli::demo::DemoArgs),
 }
 
 fn main() -> ExitCode {
@@ -38,5 +40,6 @@ fn main() -> ExitCode {
         Command::Lut(args) => cli::lut::run(args),
         Command::Fem(args) => cli::fem::run(args),
         Command::Fit(args) => cli::fit::run(args),
+        Command::Demo(args) => cli::demo::run(args),
     }
 }

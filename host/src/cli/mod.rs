@@ -1,5 +1,6 @@
 //! Subcommand implementations; `main.rs` only dispatches.
 
+pub mod demo;
 pub mod devices;
 pub mod fem;
 pub mod fit;

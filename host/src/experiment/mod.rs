@@ -7,6 +7,8 @@
 
 pub mod indentation;
 pub mod pairing;
+#[cfg(feature = "sim")]
+pub mod simulated;
 
 pub use indentation::{
     ExperimentError, IndentationPlan, IndentationResult, RadiusSource, run_indentation,

@@ -1,0 +1,582 @@
+//! The whole measurement against hil-sim (`tactile demo`): the emulated bench is started
+//! in-process on a pseudo-terminal and the host talks to it through its real serial code
+//! path ([`crate::link::SerialTransport`]); camera frames come through hil-sim's frame
+//! channel and are measured by the host's vision ([`crate::vision`]).
+//!
+//! Steps: (1) proximity calibration on a rigid sample (a second bench with hil-sim's rigid
+//! mechanics; contact found from the load cell, u_s = h beyond it); (2) camera px/mm from
+//! frames of a reference disc of known radius rendered by hil-sim's camera model at the
+//! scenario's optics; (3) the indentation experiment ([`super::run_indentation`]);
+//! (4) the fit against the table.
+
+use std::sync::mpsc::Receiver;
+use std::time::Duration;
+
+use hil_sim::bench::{BenchHandle, BenchOptions, start};
+use hil_sim::camera::{CameraRenderer, FrameScene, PixelFormat};
+use hil_sim::device::SimFrame;
+use hil_sim::rng::SimRng;
+use hil_sim::scenario::Scenario;
+use protocol::{ChannelSet, Request};
+
+use super::RadiusSource;
+use super::pairing::RadiusSample;
+use crate::calibration::ProximityCalibration;
+use crate::camera::{GrayImage, host_clock};
+use crate::link::{Link, LinkConfig, LinkError, SerialTransport};
+use crate::vision::contact_radius::{ContactRadiusConfig, ContactRadiusEstimator};
+use crate::vision::px_per_mm::PxPerMmCalibration;
+
+/// Errors of the simulated pipeline.
+#[derive(Debug, thiserror::Error)]
+pub enum SimRunError {
+    #[error("hil-sim: {0}")]
+    Sim(String),
+    #[error(transparent)]
+    Link(#[from] LinkError),
+    #[error("calibration: {0}")]
+    Calibration(String),
+    #[error("camera: {0}")]
+    Camera(String),
+}
+
+/// Starts `scenario` and connects to it over its PTY.
+pub fn start_and_connect(scenario: Scenario) -> Result<(BenchHandle, Link), SimRunError> {
+    let bench =
+        start(scenario, BenchOptions::default()).map_err(|e| SimRunError::Sim(e.to_string()))?;
+    let path = bench.pty_path().display().to_string();
+    let transport = SerialTransport::open(&path).map_err(|e| SimRunError::Link(e.into()))?;
+    let link = Link::connect(Box::new(transport), LinkConfig::default())?;
+    Ok((bench, link))
+}
+
+/// Gray luma of a simulated frame.
+pub fn frame_luma(f: &SimFrame) -> Option<GrayImage> {
+    let pixels = match f.format {
+        PixelFormat::Gray8 => f.data.clone(),
+        PixelFormat::Yuyv => f.data.iter().step_by(2).copied().collect(),
+    };
+    GrayImage::new(f.width, f.height, pixels).ok()
+}
+
+/// Host time (µs on [`host_clock`]) of a frame, from the bench's epoch.
+fn frame_host_us(bench_epoch_host_us: f64, f: &SimFrame) -> f64 {
+    bench_epoch_host_us + f.timestamp_us as f64
+}
+
+/// Radii from hil-sim's frame channel through the host's vision.
+pub struct SimRadiusSource<'b> {
+    pub frames: &'b Receiver<SimFrame>,
+    pub estimator: ContactRadiusEstimator,
+    pub px_per_mm: PxPerMmCalibration,
+    pub epoch_host_us: f64,
+    pub unmeasured: u64,
+    pub dropped: u64,
+    last_seq: Option<u64>,
+}
+
+impl std::fmt::Debug for SimRadiusSource<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SimRadiusSource").finish_non_exhaustive()
+    }
+}
+
+impl<'b> SimRadiusSource<'b> {
+    pub fn new(
+        bench: &'b BenchHandle,
+        reference: GrayImage,
+        px_per_mm: PxPerMmCalibration,
+    ) -> Result<Self, SimRunError> {
+        let epoch = bench
+            .epoch()
+            .ok_or_else(|| SimRunError::Sim("the bench has no real-time epoch yet".into()))?;
+        let epoch_host_us = host_clock::now_us() as f64 - epoch.elapsed().as_micros() as f64;
+        Ok(Self {
+            frames: &bench.frames,
+            estimator: ContactRadiusEstimator::new(reference, ContactRadiusConfig::default())
+                .map_err(|e| SimRunError::Camera(e.to_string()))?,
+            px_per_mm,
+            epoch_host_us,
+            unmeasured: 0,
+            dropped: 0,
+            last_seq: None,
+        })
+    }
+}
+
+impl RadiusSource for SimRadiusSource<'_> {
+    fn poll(&mut self) -> Vec<RadiusSample> {
+        let mut out = Vec::new();
+        while let Ok(f) = self.frames.try_recv() {
+            if let Some(last) = self.last_seq {
+                self.dropped += f.seq.saturating_sub(last + 1);
+            }
+            self.last_seq = Some(f.seq);
+            let Some(img) = frame_luma(&f) else {
+                self.unmeasured += 1;
+                continue;
+            };
+            match self.estimator.measure(&img) {
+                Ok(m) => {
+                    let a_mm = match (&m.disc, m.contact) {
+                        (Some(d), true) => self.px_per_mm.px_to_mm(d.radius_px).max(0.0),
+                        _ => 0.0,
+                    };
+                    out.push(RadiusSample {
+                        host_time_us: frame_host_us(self.epoch_host_us, &f),
+                        a_mm,
+                    });
+                }
+                Err(_) => self.unmeasured += 1,
+            }
+        }
+        out
+    }
+
+    fn failures(&self) -> (u64, u64) {
+        (self.unmeasured, self.dropped)
+    }
+}
+
+/// Waits for a no-contact reference frame (the newest one after `settle`).
+pub fn reference_frame(
+    link: &mut Link,
+    bench: &BenchHandle,
+    settle: Duration,
+) -> Result<GrayImage, SimRunError> {
+    link.pump(settle)?;
+    let mut newest = None;
+    while let Ok(f) = bench.frames.try_recv() {
+        newest = Some(f);
+    }
+    for _ in 0..50 {
+        if newest.is_some() {
+            break;
+        }
+        link.pump(Duration::from_millis(20))?;
+        while let Ok(f) = bench.frames.try_recv() {
+            newest = Some(f);
+        }
+    }
+    newest
+        .as_ref()
+        .and_then(frame_luma)
+        .ok_or_else(|| SimRunError::Camera("no camera frame arrived".into()))
+}
+
+/// Camera px/mm from frames of a reference disc of `radius_mm` (two radii, so the edge
+/// offset is fitted too), imaged by hil-sim's camera model with the scenario's optics.
+pub fn px_per_mm_from_reference_disc(
+    scenario: &Scenario,
+    radii_mm: &[f64],
+) -> Result<PxPerMmCalibration, SimRunError> {
+    let mut cfg = scenario.camera.clone();
+    cfg.format = PixelFormat::Gray8;
+    let mut renderer = CameraRenderer::new(cfg.clone());
+    let mut rng = SimRng::new(scenario.seed ^ 0xD15C);
+    let mut buf = Vec::new();
+    let mut render = |radius_px: f64, rng: &mut SimRng| {
+        renderer.render_gray(
+            &FrameScene {
+                radius_px,
+                axis_ratio: 1.0,
+                axis_angle_rad: 0.0,
+                led: 1.0,
+                noise: true,
+                mirror: true,
+            },
+            rng,
+            &mut buf,
+        );
+        GrayImage::new(cfg.width, cfg.height, buf.clone())
+    };
+    let reference = render(0.0, &mut rng).map_err(|e| SimRunError::Camera(e.to_string()))?;
+    let mut samples = Vec::new();
+    let est = ContactRadiusEstimator::new(reference, ContactRadiusConfig::default())
+        .map_err(|e| SimRunError::Camera(e.to_string()))?;
+    for &r in radii_mm {
+        for _ in 0..3 {
+            // the disc's physical radius times the optics' true scale: what the camera sees
+            let img = render(r * cfg.px_per_mm, &mut rng)
+                .map_err(|e| SimRunError::Camera(e.to_string()))?;
+            let m = est
+                .measure(&img)
+                .map_err(|e| SimRunError::Camera(e.to_string()))?;
+            let d = m.disc.ok_or_else(|| {
+                SimRunError::Camera(format!("reference disc of {r} mm not found"))
+            })?;
+            samples.push((r, d.radius_px, d.radius_sigma_px));
+        }
+    }
+    PxPerMmCalibration::from_measurements(&samples).map_err(|e| SimRunError::Camera(e.to_string()))
+}
+
+/// Proximity calibration on a rigid sample at `pressure_kpa`: the stage moves slowly from
+/// `start_mm` to `end_mm`; contact is where the load first exceeds `contact_load_n`;
+/// beyond it u_s = h (stage travel past contact). Returns the parabola and the manometer
+/// zero (vented reading before pressurising).
+pub fn rigid_calibration(
+    link: &mut Link,
+    pressure_kpa: f64,
+    start_mm: f64,
+    end_mm: f64,
+) -> Result<(ProximityCalibration, f64), SimRunError> {
+    let units = *link.units();
+    link.start_stream(1000, ChannelSet::ALL)?;
+    link.request(Request::Vent { open: true })?;
+    link.pump(Duration::from_millis(300))?;
+    let zero: Vec<f64> = link
+        .drain_samples()
+        .iter()
+        .filter_map(|s| s.sample.manometer_counts)
+        .map(|c| units.manometer_kpa(c))
+        .collect();
+    let manometer_zero = zero.iter().sum::<f64>() / zero.len().max(1) as f64;
+    link.request(Request::Vent { open: false })?;
+    link.request(Request::SetPressure {
+        setpoint_kpa: (pressure_kpa + manometer_zero) as f32,
+    })?;
+    let speed = 2.0;
+    let go = |link: &mut Link,
+              target_mm: f64,
+              speed_mm_per_s: f64|
+     -> Result<Vec<protocol::Sample>, SimRunError> {
+        link.request(Request::MoveStage {
+            target_steps: units.stage_steps(target_mm),
+            speed_steps_per_s: (speed_mm_per_s * units.stage_steps_per_mm()) as u32,
+            accel_steps_per_s2: (50.0 * units.stage_steps_per_mm()) as u32,
+        })?;
+        let mut got = Vec::new();
+        let deadline = host_clock::now_us() + 30_000_000;
+        loop {
+            link.pump(Duration::from_millis(50))?;
+            got.extend(link.drain_samples().into_iter().map(|s| s.sample));
+            if let Some(s) = got.last()
+                && s.stage_steps == Some(units.stage_steps(target_mm))
+                && !s.status.contains(protocol::StatusFlags::STAGE_MOVING)
+            {
+                return Ok(got);
+            }
+            if host_clock::now_us() > deadline {
+                return Err(SimRunError::Calibration(format!(
+                    "stage did not reach {target_mm} mm"
+                )));
+            }
+        }
+    };
+    go(link, start_mm, speed)?;
+    link.pump(Duration::from_millis(800))?;
+    link.drain_samples();
+    link.request(Request::TareLoad)?;
+    link.pump(Duration::from_millis(200))?;
+    link.drain_samples();
+    let sweep = go(link, end_mm, 0.5)?;
+    go(link, start_mm, speed)?;
+    link.stop_stream()?;
+    link.request(Request::PressureOff)?;
+    // contact: first sample whose load exceeds 5 mN
+    let contact_steps = sweep
+        .iter()
+        .find(|s| s.load_counts.is_some_and(|c| units.load_n(c) > 0.005))
+        .and_then(|s| s.stage_steps)
+        .ok_or_else(|| {
+            SimRunError::Calibration("no contact with the rigid sample in the sweep".into())
+        })?;
+    let contact_mm = units.stage_mm(contact_steps);
+    let pairs: Vec<(f64, f64)> = sweep
+        .iter()
+        .filter_map(|s| {
+            Some((
+                units.stage_mm(s.stage_steps?) - contact_mm,
+                units.proximity_v(s.proximity_counts?),
+            ))
+        })
+        .filter(|(h, _)| *h > 0.02)
+        .collect();
+    let cal = ProximityCalibration::fit(pressure_kpa, &pairs)
+        .map_err(|e| SimRunError::Calibration(e.to_string()))?;
+    Ok((cal, manometer_zero))
+}
+
+/// Options of [`run_demo`].
+#[derive(Debug, Clone, Default)]
+pub struct DemoOptions {
+    pub modulus_kpa: f64,
+    pub pressure_kpa: f64,
+    pub seed: u64,
+    pub scenario: Option<std::path::PathBuf>,
+    pub out: Option<std::path::PathBuf>,
+    pub lut: Option<std::path::PathBuf>,
+    pub repeats: u32,
+    pub progress: bool,
+}
+
+/// What the demo printed (and `--json` emits).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct DemoReport {
+    pub modulus_kpa: f64,
+    pub ci95_kpa: [f64; 2],
+    pub rms_residual_mm: f64,
+    pub record_dir: String,
+    /// True modulus of the simulated sample.
+    pub true_modulus_kpa: f64,
+    pub partial: bool,
+    pub points: usize,
+    pub link: crate::link::LinkStats,
+    pub frames_unmeasured: u64,
+    pub frames_dropped: u64,
+    pub px_per_mm: f64,
+    pub proximity: ProximityCalibration,
+    pub elapsed_s: f64,
+    pub notes: Vec<String>,
+}
+
+/// Demo failures; `is_input` ones exit with code 2.
+#[derive(Debug, thiserror::Error)]
+pub enum DemoError {
+    #[error("scenario {path}: {reason}")]
+    Scenario { path: String, reason: String },
+    #[error("lookup table {path}: {reason}")]
+    Lut { path: String, reason: String },
+    #[error(transparent)]
+    Sim(#[from] SimRunError),
+    #[error(transparent)]
+    Link(#[from] LinkError),
+    #[error(transparent)]
+    Record(#[from] crate::records::RecordError),
+    #[error(transparent)]
+    Experiment(#[from] super::ExperimentError),
+    #[error("fit: {0}")]
+    Fit(#[from] crate::fit::FitError),
+    #[error("curve: {0}")]
+    Curve(#[from] crate::curve_csv::CurveCsvError),
+}
+
+impl DemoError {
+    pub fn is_input(&self) -> bool {
+        matches!(self, DemoError::Scenario { .. } | DemoError::Lut { .. })
+    }
+}
+
+/// The fit fixture table (fem-core at mesh level -2): the only table in the repository
+/// until a production table is shipped.
+pub fn fixture_lut_path() -> std::path::PathBuf {
+    std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/fit_fixture.lut")
+}
+
+/// The built-in scenario: the paper's gelatin (45 x 7 mm), mechanics solved by fem-core
+/// at start-up with the fixture table's settings (mesh level -2, 10 steps to 1.9 mm).
+pub fn demo_scenario(modulus_kpa: f64, pressure_kpa: f64, seed: u64) -> Scenario {
+    let mut s = Scenario {
+        name: "demo-gelatin".into(),
+        seed,
+        ..Scenario::default()
+    };
+    s.sample.modulus_kpa = modulus_kpa;
+    s.mechanics = hil_sim::scenario::MechanicsSource::Solve {
+        pressures_kpa: vec![pressure_kpa],
+        modulus_factors: vec![1.0],
+        mesh_level: -2,
+        steps: 10,
+        max_depth_mm: 1.9,
+    };
+    s
+}
+
+/// The whole demo with an explicit scenario (tests use this to inject faults).
+pub fn run_demo_with(scenario: Scenario, options: &DemoOptions) -> Result<DemoReport, DemoError> {
+    use crate::curve_csv::{CurveCsv, CurveRow, write_curve_csv};
+    use crate::fit::{FitOptions, FitPoint, LutModel, fit_modulus};
+    use crate::records::{RecordDir, unix_now_s, utc_stamp};
+    let started = std::time::Instant::now();
+    let mut notes = vec![
+        "proximity calibration takes u_s = h beyond the load-detected contact on the rigid sample; fem-core's rigid-contact u_s(h) correction is not applied (not implemented)".to_string(),
+    ];
+    let lut_path = options.lut.clone().unwrap_or_else(fixture_lut_path);
+    if options.lut.is_none() {
+        notes.push(format!(
+            "fit table: {} (mesh level -2 fixture; no production table is shipped yet)",
+            lut_path.display()
+        ));
+    }
+    let lut_file = fem_core::lut::read_lut(&lut_path).map_err(|e| DemoError::Lut {
+        path: lut_path.display().to_string(),
+        reason: e.to_string(),
+    })?;
+    let out = options.out.clone().unwrap_or_else(|| {
+        std::path::PathBuf::from("records").join(format!("demo-{}", utc_stamp(unix_now_s())))
+    });
+    let record = RecordDir::create(&out)?;
+    let pressure = options.pressure_kpa;
+    let surface = scenario.stage.surface_mm;
+    let progress = if options.progress {
+        indicatif::ProgressBar::new(u64::from(options.repeats))
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+
+    // 1. camera scale
+    let px = px_per_mm_from_reference_disc(&scenario, &[1.0, 2.5])?;
+    // 2. proximity parabola on a rigid sample (no faults during calibration)
+    let mut rigid = scenario.clone();
+    rigid.name = format!("{}-rigid-calibration", scenario.name);
+    rigid.mechanics = hil_sim::scenario::MechanicsSource::Rigid {};
+    rigid.sample.modulus_kpa = 3.0e6;
+    rigid.faults = Default::default();
+    let (proximity, manometer_zero) = {
+        let (bench, mut link) = start_and_connect(rigid)?;
+        let r = rigid_calibration(&mut link, pressure, surface - 0.3, surface + 1.6)?;
+        drop(link);
+        bench.stop();
+        r
+    };
+    let calibration = crate::calibration::CalibrationRecord {
+        created_unix_s: unix_now_s(),
+        device_serial: String::new(),
+        firmware_version: String::new(),
+        proximity: vec![proximity],
+        proximity_u_s_equals_h: vec![proximity],
+        u_s_vs_h_max_difference_mm: None,
+        rigid_u_s_source: "u_s = h (paper's assumption)".into(),
+        px_per_mm: Some(px.px_per_mm),
+        manometer_zero_kpa: manometer_zero,
+        load_tare_residual_n: 0.0,
+    };
+    record.write_json("calibration.json", &calibration)?;
+
+    // 3. measurement
+    let true_modulus = scenario.sample.modulus_kpa;
+    let scenario_json = serde_json::to_value(&scenario).unwrap_or_default();
+    let (bench, mut link) = start_and_connect(scenario)?;
+    let mut meta = serde_json::json!({
+        "software": { "name": "tactile", "version": env!("CARGO_PKG_VERSION") },
+        "protocol_version": link.info().protocol_version,
+        "device": {
+            "serial": link.info().serial.as_str(),
+            "firmware_version": link.info().firmware_version.as_str(),
+            "port": link.port_name(),
+        },
+        "lut": { "path": lut_path.display().to_string(), "sha256": lut_file.sha256 },
+        "calibration": calibration,
+        "scenario": scenario_json,
+        "plan": { "pressure_kpa": pressure, "repeats": options.repeats },
+        "status": "running",
+    });
+    record.write_json("meta.json", &meta)?;
+    link.request(Request::SetLed {
+        duty_per_10k: 10_000,
+    })?;
+    link.request(Request::SetPressure {
+        setpoint_kpa: (pressure + manometer_zero) as f32,
+    })?;
+    let reference = reference_frame(&mut link, &bench, Duration::from_millis(1500))?;
+    let px_per_mm = px.px_per_mm;
+    let mut source = SimRadiusSource::new(&bench, reference, px)?;
+    let plan = super::IndentationPlan {
+        pressure_kpa: pressure,
+        start_mm: surface - 0.2,
+        depth_mm: 1.7,
+        speed_mm_per_s: 2.0,
+        repeats: options.repeats,
+        stream_rate_hz: 1000,
+    };
+    let run = super::run_indentation(
+        &mut link,
+        &mut source,
+        &plan,
+        &proximity,
+        manometer_zero,
+        &record,
+        &progress,
+    );
+    progress.finish_and_clear();
+    let stats = link.stats();
+    let (unmeasured, dropped) = source.failures();
+    let result = match run {
+        Ok(r) => r,
+        Err(e) => {
+            meta["status"] = serde_json::json!(format!("failed: {e}"));
+            meta["link"] = serde_json::to_value(stats).unwrap_or_default();
+            record.write_json("meta.json", &meta)?;
+            return Err(e.into());
+        }
+    };
+    drop(link);
+    drop(source);
+    let _ = bench.stop();
+    // 4. curve and fit
+    let rows: Vec<CurveRow> = result
+        .points
+        .iter()
+        .map(|(t, p)| CurveRow {
+            u_s_mm: p.u_s_mm,
+            a_mm: p.a_mm,
+            load_n: p.load_n,
+            p_air_kpa: Some(p.p_air_kpa),
+            t_s: Some(p.t_s),
+            phase: Some(p.phase),
+            test: Some(*t),
+            h_mm: None,
+            volume_mm3: None,
+        })
+        .collect();
+    write_curve_csv(
+        &record.path("curve.csv"),
+        &CurveCsv {
+            metadata: vec![("p_air_kpa".into(), format!("{pressure}"))],
+            rows,
+        },
+    )?;
+    // loading points in contact, at the nominal pressure (the manometer trace is in samples.csv)
+    let points: Vec<FitPoint> = result
+        .points
+        .iter()
+        .filter(|(_, p)| p.phase == crate::curve_csv::Phase::Load && p.a_mm > 0.0 && p.u_s_mm > 0.0)
+        .map(|(t, p)| FitPoint {
+            u_s_mm: p.u_s_mm,
+            a_mm: p.a_mm,
+            p_air_kpa: pressure,
+            test: *t,
+            load_n: p.load_n,
+        })
+        .collect();
+    let model = LutModel::new(&lut_file.lut).map_err(|e| DemoError::Lut {
+        path: lut_path.display().to_string(),
+        reason: e.to_string(),
+    })?;
+    let fit = fit_modulus(&model, &points, FitOptions::default())?;
+    record.write_json("fit.json", &fit)?;
+    meta["status"] = serde_json::json!("complete");
+    meta["link"] = serde_json::to_value(stats).unwrap_or_default();
+    meta["clock"] = serde_json::to_value(None::<()>).unwrap_or_default();
+    record.write_json("meta.json", &meta)?;
+    notes.push("plots are not written (not implemented)".into());
+    Ok(DemoReport {
+        modulus_kpa: fit.modulus_kpa,
+        ci95_kpa: fit.ci95_kpa,
+        rms_residual_mm: fit.rms_residual_mm,
+        record_dir: record.dir.display().to_string(),
+        true_modulus_kpa: true_modulus,
+        partial: false,
+        points: points.len(),
+        link: stats,
+        frames_unmeasured: unmeasured,
+        frames_dropped: dropped,
+        px_per_mm,
+        proximity,
+        elapsed_s: started.elapsed().as_secs_f64(),
+        notes,
+    })
+}
+
+/// `tactile demo`.
+pub fn run_demo(options: &DemoOptions) -> Result<DemoReport, DemoError> {
+    let scenario = match &options.scenario {
+        Some(path) => Scenario::load(path).map_err(|e| DemoError::Scenario {
+            path: path.display().to_string(),
+            reason: e.to_string(),
+        })?,
+        None => demo_scenario(options.modulus_kpa, options.pressure_kpa, options.seed),
+    };
+    run_demo_with(scenario, options)
+}
