@@ -456,13 +456,15 @@ fn consistent_pressure(current: &[[f64; 2]], forces: &[f64], end: usize) -> Vec<
 /// grows like `(r - a)^{3/2}` (Hertz/Sneddon), so `g^{2/3}` is linear in r near the edge:
 /// extrapolating it from the first two open nodes locates the edge with sub-element
 /// precision. If that is not possible, the zero crossing of the indicator between node k
-/// and k + 1 is interpolated linearly. The result is clamped to [r_k, r_{k+1}].
+/// and k + 1 is interpolated linearly. The result is clamped to [r_{k-1}, r_{k+1}].
 fn contact_edge_mm(current: &[[f64; 2]], gaps: &[Option<f64>], indicator: &[f64], k: usize) -> f64 {
     let r = |i: usize| current[i][0];
     if k + 1 >= current.len() {
         return r(k);
     }
-    let (lo, hi) = (r(k), r(k + 1));
+    // the outermost node with a positive indicator may carry a small augmented-Lagrangian
+    // force while already open, so the extrapolated edge may lie up to one node inside it
+    let (lo, hi) = (r(k.saturating_sub(1)), r(k + 1));
     if k + 2 < current.len()
         && let (Some(g1), Some(g2)) = (gaps[k + 1], gaps[k + 2])
         && g1 > 0.0
