@@ -6,6 +6,8 @@
 //!   the 95 % interval covers the truth at close to its nominal rate;
 //! - joint fits across pressures, the load channel and the pressure recommendation.
 
+#![allow(clippy::unwrap_used)] // tests may unwrap (COMMON.md)
+
 use fem_core::lut::{Lut, read_lut};
 use host::curve_csv::read_curve_csv;
 use host::fit::{

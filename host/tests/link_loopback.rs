@@ -2,6 +2,8 @@
 //! real time: handshake, version check, requests, stream loss counting, clock mapping,
 //! unplug.
 
+#![allow(clippy::unwrap_used)] // tests may unwrap (COMMON.md)
+
 use host::link::loopback::{LoopbackDevice, LoopbackFaults, SimpleBench};
 use host::link::{Link, LinkConfig, LinkError};
 use protocol::{ChannelSet, PROTOCOL_VERSION, Reply, Request};

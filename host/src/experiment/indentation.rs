@@ -16,6 +16,10 @@ pub trait RadiusSource {
     fn poll(&mut self) -> Vec<RadiusSample>;
     /// Frames that arrived but could not be measured, and frames dropped (sequence gaps).
     fn failures(&self) -> (u64, u64);
+    /// Waits for frames still being measured (at the end of a run).
+    fn finish(&mut self) -> Vec<RadiusSample> {
+        Vec::new()
+    }
 }
 
 /// What to do.
@@ -287,6 +291,12 @@ pub fn run_indentation(
     }
     link.stop_stream()?;
     link.request(Request::PressureOff)?;
+    for f in radius.finish() {
+        streams
+            .frames
+            .append(&format!("{:.1},{:.5}", f.host_time_us, f.a_mm))?;
+        frames.push(f);
+    }
     streams.samples.flush()?;
     streams.frames.flush()?;
     // 4. pair per cycle
@@ -295,23 +305,36 @@ pub fn run_indentation(
         .filter_map(|s| displacement(link, s, proximity, manometer_zero_kpa))
         .collect();
     let t_origin = disp.first().map(|d| d.host_time_us).unwrap_or(0.0);
+    // Cycles are cut from the data, not the wall clock: each excursion of the stage beyond
+    // the start position (by more than 10 µm) is one indentation.
     let mut points = Vec::new();
     let gap_us = 4.0 * 1e6 / f64::from(plan.stream_rate_hz.max(1)) + 2000.0;
-    for (k, &(a, b)) in cycles.iter().enumerate() {
-        let ds: Vec<DisplacementSample> = disp
-            .iter()
-            .filter(|d| d.host_time_us >= a && d.host_time_us <= b)
-            .copied()
-            .collect();
+    let beyond = |d: &DisplacementSample| d.stage_mm > plan.start_mm + 0.01;
+    let mut k = 0usize;
+    let mut cycle = 0u32;
+    while k < disp.len() {
+        if !beyond(&disp[k]) {
+            k += 1;
+            continue;
+        }
+        let first = k.saturating_sub(1);
+        while k < disp.len() && beyond(&disp[k]) {
+            k += 1;
+        }
+        let last = k.min(disp.len() - 1);
+        let ds = &disp[first..=last];
+        let (a, b) = (ds[0].host_time_us, ds[ds.len() - 1].host_time_us);
         let fs: Vec<RadiusSample> = frames
             .iter()
             .filter(|f| f.host_time_us >= a && f.host_time_us <= b)
             .copied()
             .collect();
-        for p in pair_frames(&ds, &fs, gap_us, t_origin) {
-            points.push((k as u32, p));
+        for p in pair_frames(ds, &fs, gap_us, t_origin) {
+            points.push((cycle, p));
         }
+        cycle += 1;
     }
+    let _ = &cycles;
     let pressures: Vec<f64> = disp.iter().map(|d| d.p_air_kpa).collect();
     Ok(IndentationResult {
         points,

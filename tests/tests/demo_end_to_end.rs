@@ -1,0 +1,111 @@
+//! `tactile demo`'s pipeline end to end against hil-sim over a PTY (calibrate, measure,
+//! fit, record). Each run takes ~10-25 s of real time (the bench runs in real time), so
+//! these are ignored by default; run them in release:
+//!
+//! `cargo test -p system-tests --release --test demo_end_to_end -- --ignored --nocapture`
+
+#![allow(clippy::unwrap_used)] // tests may unwrap (COMMON.md)
+
+use host::experiment::simulated::{DemoError, DemoOptions, demo_scenario, run_demo_with};
+use std::path::PathBuf;
+
+fn out_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("tactile-e2e-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+fn options(name: &str, modulus: f64, repeats: u32) -> DemoOptions {
+    DemoOptions {
+        modulus_kpa: modulus,
+        pressure_kpa: 6.0,
+        seed: 3,
+        scenario: None,
+        out: Some(out_dir(name)),
+        lut: None,
+        repeats,
+        progress: false,
+    }
+}
+
+/// The acceptance criterion: within 2 % with the interval covering the truth.
+/// KNOWN TO FAIL at the time of writing: the demo measures about 7 % low at 200 kPa (see
+/// the report: a camera-to-stream timing lag and a radius bias of ~0.02 mm remain).
+#[test]
+#[ignore = "real-time hil-sim run (~25 s each); release"]
+fn demo_recovers_the_modulus_within_2_percent() {
+    for modulus in [60.0, 200.0] {
+        let opts = options(&format!("e{modulus}"), modulus, 5);
+        let report = run_demo_with(demo_scenario(modulus, 6.0, 3), &opts).unwrap();
+        eprintln!(
+            "E2 {modulus}: fit {:.1} kPa [{:.1}, {:.1}], rms {:.4} mm, {} points, {:.1} s",
+            report.modulus_kpa,
+            report.ci95_kpa[0],
+            report.ci95_kpa[1],
+            report.rms_residual_mm,
+            report.points,
+            report.elapsed_s
+        );
+        assert!(
+            (report.modulus_kpa / modulus - 1.0).abs() < 0.02,
+            "{report:?}"
+        );
+        assert!(report.ci95_kpa[0] <= modulus && modulus <= report.ci95_kpa[1]);
+    }
+}
+
+#[test]
+#[ignore = "real-time hil-sim run (~25 s); release"]
+fn corrupted_bytes_complete_with_the_loss_counted() {
+    let mut scenario = demo_scenario(200.0, 6.0, 4);
+    scenario.faults.byte_corruption_rate = 2e-5;
+    let report = run_demo_with(scenario, &options("corrupt", 200.0, 2)).unwrap();
+    eprintln!("{:?}", report.link);
+    assert!(report.link.frame_errors > 0, "{:?}", report.link);
+    assert!(report.link.blocks_lost > 0, "{:?}", report.link);
+    let dir = PathBuf::from(&report.record_dir);
+    for f in [
+        "meta.json",
+        "samples.csv",
+        "frames.csv",
+        "curve.csv",
+        "fit.json",
+    ] {
+        assert!(dir.join(f).exists(), "{f}");
+    }
+}
+
+#[test]
+#[ignore = "real-time hil-sim run (~20 s); release"]
+fn unplug_leaves_a_readable_partial_record() {
+    let mut scenario = demo_scenario(200.0, 6.0, 5);
+    // hil-sim's clock: the measurement bench runs fast until the host speaks, then in real
+    // time; 4 s after start is during the indentations.
+    scenario.faults.disconnect = Some(hil_sim::faults::Disconnect {
+        at_s: 4.0,
+        duration_s: None,
+    });
+    let opts = options("unplug", 200.0, 5);
+    let err = run_demo_with(scenario, &opts).unwrap_err();
+    let msg = err.to_string();
+    eprintln!("{msg}");
+    assert!(
+        matches!(err, DemoError::Experiment(_) | DemoError::Link(_)),
+        "{msg}"
+    );
+    let dir = opts.out.unwrap();
+    let meta: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("meta.json")).unwrap()).unwrap();
+    assert!(
+        meta["status"].as_str().unwrap().starts_with("failed"),
+        "{meta}"
+    );
+    let samples = std::fs::read_to_string(dir.join("samples.csv")).unwrap();
+    assert!(
+        samples.lines().count() > 100,
+        "{} lines",
+        samples.lines().count()
+    );
+    // every line complete (8 fields): nothing half-written
+    assert!(samples.lines().all(|l| l.split(',').count() == 8));
+}
