@@ -7,6 +7,7 @@ pub mod curve_csv;
 pub mod experiment;
 pub mod fit;
 pub mod link;
+pub mod plots;
 pub mod records;
 pub mod usb;
 pub mod vision;

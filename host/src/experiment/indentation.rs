@@ -12,12 +12,13 @@ use crate::records::{RecordDir, RecordError, StreamCsv};
 
 /// Contact radii from the camera (frames already measured by the vision module).
 pub trait RadiusSource {
-    /// Radii measured since the last call, on the host clock.
-    fn poll(&mut self) -> Vec<RadiusSample>;
+    /// Radii measured since the last call, on the host clock (`clock` maps device time to
+    /// host time, for sources stamped on the device's clock).
+    fn poll(&mut self, clock: &crate::link::ClockMap) -> Vec<RadiusSample>;
     /// Frames that arrived but could not be measured, and frames dropped (sequence gaps).
     fn failures(&self) -> (u64, u64);
     /// Waits for frames still being measured (at the end of a run).
-    fn finish(&mut self) -> Vec<RadiusSample> {
+    fn finish(&mut self, _clock: &crate::link::ClockMap) -> Vec<RadiusSample> {
         Vec::new()
     }
 }
@@ -115,7 +116,7 @@ fn collect(
         ))?;
         into.push(s);
     }
-    for f in radius.poll() {
+    for f in radius.poll(link.clock()) {
         streams
             .frames
             .append(&format!("{:.1},{:.5}", f.host_time_us, f.a_mm))?;
@@ -291,7 +292,7 @@ pub fn run_indentation(
     }
     link.stop_stream()?;
     link.request(Request::PressureOff)?;
-    for f in radius.finish() {
+    for f in radius.finish(link.clock()) {
         streams
             .frames
             .append(&format!("{:.1},{:.5}", f.host_time_us, f.a_mm))?;

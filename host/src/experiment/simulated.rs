@@ -23,7 +23,7 @@ use super::RadiusSource;
 use super::pairing::RadiusSample;
 use crate::calibration::ProximityCalibration;
 use crate::camera::{GrayImage, host_clock};
-use crate::link::{Link, LinkConfig, LinkError, SerialTransport};
+use crate::link::{ClockMap, Link, LinkConfig, LinkError, SerialTransport};
 use crate::vision::contact_radius::{ContactRadiusConfig, ContactRadiusEstimator};
 use crate::vision::px_per_mm::PxPerMmCalibration;
 
@@ -46,7 +46,12 @@ pub fn start_and_connect(scenario: Scenario) -> Result<(BenchHandle, Link), SimR
         start(scenario, BenchOptions::default()).map_err(|e| SimRunError::Sim(e.to_string()))?;
     let path = bench.pty_path().display().to_string();
     let transport = SerialTransport::open(&path).map_err(|e| SimRunError::Link(e.into()))?;
-    let link = Link::connect(Box::new(transport), LinkConfig::default())?;
+    // The simulation can fall behind the wall clock on a loaded machine: be patient.
+    let config = LinkConfig {
+        request_timeout: Duration::from_millis(1000),
+        ..LinkConfig::default()
+    };
+    let link = Link::connect(Box::new(transport), config)?;
     Ok((bench, link))
 }
 
@@ -59,9 +64,12 @@ pub fn frame_luma(f: &SimFrame) -> Option<GrayImage> {
     GrayImage::new(f.width, f.height, pixels).ok()
 }
 
-/// Host time (µs on [`host_clock`]) of a frame, from the bench's epoch.
-fn frame_host_us(bench_epoch_host_us: f64, f: &SimFrame) -> f64 {
-    bench_epoch_host_us + f.timestamp_us as f64
+/// Device time (µs) at a frame's exposure: hil-sim stamps frames in simulated time, which
+/// equals wall time only while the simulation keeps up with the wall clock (it falls behind
+/// on a starved CPU); the simulated MCU clock (scenario `clock`: offset and drift) puts the
+/// frame on the device's clock, which the link maps to host time like every sample.
+fn frame_device_us(clock: &hil_sim::sensors::ClockConfig, f: &SimFrame) -> f64 {
+    clock.device_us(f.timestamp_us as f64 * 1e-6)
 }
 
 /// Radii from hil-sim's frame channel through the host's vision. Frames are taken off
@@ -86,13 +94,11 @@ impl std::fmt::Debug for SimRadiusSource<'_> {
 impl<'b> SimRadiusSource<'b> {
     pub fn new(
         bench: &'b BenchHandle,
+        scenario_clock: &hil_sim::sensors::ClockConfig,
         reference: GrayImage,
         px_per_mm: PxPerMmCalibration,
     ) -> Result<Self, SimRunError> {
-        let epoch = bench
-            .epoch()
-            .ok_or_else(|| SimRunError::Sim("the bench has no real-time epoch yet".into()))?;
-        let epoch_host_us = host_clock::now_us() as f64 - epoch.elapsed().as_micros() as f64;
+        let clock = scenario_clock.clone();
         let (to_worker, worker_rx) = std::sync::mpsc::channel::<SimFrame>();
         let (worker_tx, from_worker) = std::sync::mpsc::channel();
         let worker = std::thread::Builder::new()
@@ -112,7 +118,8 @@ impl<'b> SimRadiusSource<'b> {
                                 _ => 0.0,
                             };
                             RadiusSample {
-                                host_time_us: frame_host_us(epoch_host_us, &f),
+                                // device time here; mapped to host time in `poll`
+                                host_time_us: frame_device_us(&clock, &f),
                                 a_mm,
                             }
                         });
@@ -134,15 +141,15 @@ impl<'b> SimRadiusSource<'b> {
     }
 
     /// Waits for the worker to measure every frame handed to it.
-    fn finish_inner(&mut self) -> Vec<RadiusSample> {
-        let mut out = self.poll();
+    fn finish_inner(&mut self, clock: &ClockMap) -> Vec<RadiusSample> {
+        let mut out = self.poll(clock);
         self.to_worker = None;
         if let Some(w) = self.worker.take() {
             let _ = w.join();
         }
         for m in self.from_worker.try_iter() {
             match m {
-                Some(r) => out.push(r),
+                Some(r) => out.extend(to_host(clock, r)),
                 None => self.unmeasured += 1,
             }
         }
@@ -150,8 +157,16 @@ impl<'b> SimRadiusSource<'b> {
     }
 }
 
+fn to_host(clock: &ClockMap, r: RadiusSample) -> Option<RadiusSample> {
+    let host = clock.device_to_host_us(r.host_time_us.max(0.0).round() as u64)?;
+    Some(RadiusSample {
+        host_time_us: host,
+        a_mm: r.a_mm,
+    })
+}
+
 impl RadiusSource for SimRadiusSource<'_> {
-    fn poll(&mut self) -> Vec<RadiusSample> {
+    fn poll(&mut self, clock: &ClockMap) -> Vec<RadiusSample> {
         while let Ok(f) = self.frames.try_recv() {
             if let Some(last) = self.last_seq {
                 self.dropped += f.seq.saturating_sub(last + 1);
@@ -164,7 +179,7 @@ impl RadiusSource for SimRadiusSource<'_> {
         let mut out = Vec::new();
         for m in self.from_worker.try_iter() {
             match m {
-                Some(r) => out.push(r),
+                Some(r) => out.extend(to_host(clock, r)),
                 None => self.unmeasured += 1,
             }
         }
@@ -175,8 +190,8 @@ impl RadiusSource for SimRadiusSource<'_> {
         (self.unmeasured, self.dropped)
     }
 
-    fn finish(&mut self) -> Vec<RadiusSample> {
-        self.finish_inner()
+    fn finish(&mut self, clock: &ClockMap) -> Vec<RadiusSample> {
+        self.finish_inner(clock)
     }
 }
 
@@ -514,6 +529,7 @@ pub fn run_demo_with(scenario: Scenario, options: &DemoOptions) -> Result<DemoRe
 
     // 3. measurement
     let true_modulus = scenario.sample.modulus_kpa;
+    let scenario_clock = scenario.clock.clone();
     let scenario_json = serde_json::to_value(&scenario).unwrap_or_default();
     let (bench, mut link) = start_and_connect(scenario)?;
     let mut meta = serde_json::json!({
@@ -539,7 +555,7 @@ pub fn run_demo_with(scenario: Scenario, options: &DemoOptions) -> Result<DemoRe
     })?;
     let reference = reference_frame(&mut link, &bench, Duration::from_millis(1500))?;
     let px_per_mm = px.px_per_mm;
-    let mut source = SimRadiusSource::new(&bench, reference, px)?;
+    let mut source = SimRadiusSource::new(&bench, &scenario_clock, reference, px)?;
     let plan = super::IndentationPlan {
         pressure_kpa: pressure,
         start_mm: surface - 0.2,
@@ -621,7 +637,13 @@ pub fn run_demo_with(scenario: Scenario, options: &DemoOptions) -> Result<DemoRe
     meta["link"] = serde_json::to_value(stats).unwrap_or_default();
     meta["clock"] = serde_json::to_value(None::<()>).unwrap_or_default();
     record.write_json("meta.json", &meta)?;
-    notes.push("plots are not written (not implemented)".into());
+    if let Err(e) = crate::plots::write_fit_plots(&record.dir, &model, &points, &fit) {
+        notes.push(format!("plots could not be written: {e}"));
+    }
+    notes.push(
+        "plots: SVG only (a_us.svg, residuals.svg); PNG and the pressure trace are not implemented"
+            .into(),
+    );
     Ok(DemoReport {
         modulus_kpa: fit.modulus_kpa,
         ci95_kpa: fit.ci95_kpa,
