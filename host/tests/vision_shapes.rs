@@ -24,6 +24,15 @@ fn no_contact_frames_report_no_contact() {
     }
     // A 2 % LED brightness change between reference and frame is not contact either.
     let reference = scene.render(false, 10);
+    // The mirror (radius 22 px at the optical centre) is found and masked with a margin.
+    let est =
+        ContactRadiusEstimator::new(reference.clone(), ContactRadiusConfig::default()).unwrap();
+    let (c, r) = est.mirror_center_radius_px().unwrap();
+    assert!(
+        (c[0] - 319.5).abs() < 0.3 && (c[1] - 239.5).abs() < 0.3,
+        "{c:?}"
+    );
+    assert!(r > 22.0 && r < 28.0, "{r}");
     let mut brighter = scene.clone();
     brighter.background *= 1.02;
     let frame = brighter.render(false, 11);

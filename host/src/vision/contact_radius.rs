@@ -176,6 +176,9 @@ pub struct ContactRadiusEstimator {
     /// The mirror's disc with a margin for its soft rim (centre, radius^2), if any:
     /// masked so its halo does not leak into the fitted levels.
     mirror_disc: Option<([f64; 2], f64)>,
+    /// `1 / max(R, 4)` per pixel, NaN where the reference is saturated or the mirror: the
+    /// per-pixel normalisation and reference mask, computed once.
+    inv_reference: Vec<f32>,
     config: ContactRadiusConfig,
 }
 
@@ -315,13 +318,38 @@ impl ContactRadiusEstimator {
             &reference,
             mirror_level.min(f64::from(config.saturation_level)),
         );
+        let sat = f64::from(config.saturation_level);
+        let w = reference.width();
+        let inv_reference = reference
+            .pixels()
+            .iter()
+            .enumerate()
+            .map(|(i, &v)| {
+                let rv = f64::from(v);
+                let in_mirror = mirror_disc.is_some_and(|(mc, r2)| {
+                    ((i % w) as f64 - mc[0]).powi(2) + ((i / w) as f64 - mc[1]).powi(2) < r2
+                });
+                if rv >= sat || rv >= mirror_level || in_mirror {
+                    f32::NAN
+                } else {
+                    (1.0 / rv.max(4.0)) as f32
+                }
+            })
+            .collect();
         Ok(Self {
             reference,
             blocks,
             mirror_level,
             mirror_disc,
+            inv_reference,
             config,
         })
+    }
+
+    /// The apex mirror found in the reference and masked: centre and radius (px, including
+    /// the 4 px rim margin).
+    pub fn mirror_center_radius_px(&self) -> Option<([f64; 2], f64)> {
+        self.mirror_disc.map(|(c, r2)| (c, r2.sqrt()))
     }
 
     pub fn reference(&self) -> &GrayImage {
@@ -615,15 +643,9 @@ impl ContactRadiusEstimator {
                 }
                 let idx = yi as usize * w_img + xi as usize;
                 let (iv, rv) = (f64::from(fpx[idx]), f64::from(rpx[idx]));
-                let in_mirror = self.mirror_disc.is_some_and(|(mc, r2)| {
-                    (xi as f64 - mc[0]).powi(2) + (yi as f64 - mc[1]).powi(2) < r2
-                });
-                let masked = iv >= sat || rv >= sat || rv >= self.mirror_level || in_mirror;
-                let nv = if masked {
-                    f64::NAN
-                } else {
-                    (iv - rv) / rv.max(4.0)
-                };
+                let inv_r = f64::from(self.inv_reference[idx]);
+                let masked = iv >= sat || inv_r.is_nan();
+                let nv = if masked { f64::NAN } else { (iv - rv) * inv_r };
                 if s < -w {
                     n_inner += 1.0;
                     if !masked {
