@@ -1,10 +1,12 @@
 //! Criterion benchmarks of the solver's inner loop on the production mesh (mesh_level 0) in
 //! a realistic contact state (gelatin E2 = 200 kPa, p_air = 6 kPa, h = 1 mm):
-//! one assembly of residual and tangent, and one full Newton solve from a perturbed state.
+//! one assembly of residual and tangent, and one Newton iteration (assembly, sparse
+//! Cholesky factorisation with the cached symbolic analysis, solve).
 //! A whole curve (stage 1 + 40 steps to h = 2 mm) is timed by
 //! `cargo run -p fem-core --release --example curve`.
 
 use criterion::{Criterion, criterion_group, criterion_main};
+use fem_core::linear_solver::SymmetricSolver;
 use fem_core::problem::solve_curve_state;
 use fem_core::{CurveParams, SolverSettings};
 
@@ -15,7 +17,7 @@ fn solver(c: &mut Criterion) {
         ..Default::default()
     };
     let settings = SolverSettings::for_level(0);
-    let (_, mut ind, state) = match solve_curve_state(&params, &settings) {
+    let (_, ind, state) = match solve_curve_state(&params, &settings) {
         Ok(s) => s,
         Err(e) => panic!("set-up solve failed: {e}"),
     };
@@ -25,17 +27,20 @@ fn solver(c: &mut Criterion) {
     group.bench_function("assemble_residual_and_tangent", |b| {
         b.iter(|| ind.model.assemble(&state, p, true))
     });
-    group.bench_function("newton_solve_from_perturbed_state", |b| {
-        b.iter(|| {
-            // perturb the converged state by 1 um on every free dof and re-converge
-            let mut u = state.clone();
-            for (i, x) in u.iter_mut().enumerate() {
-                if ind.model.is_free(i) {
-                    *x += 1e-3 * ((i as f64) * 0.618).sin();
-                }
-            }
-            ind.model.solve_equilibrium(&mut u, p)
-        })
+    // one Newton iteration: assembly plus sparse Cholesky factorisation and solve (the
+    // symbolic analysis is cached after the first call, as in the solver)
+    let mut linear = SymmetricSolver::default();
+    let n = ind.model.n_equations();
+    let one_iteration = |linear: &mut SymmetricSolver| {
+        let asm = ind.model.assemble(&state, p, true)?;
+        let rhs: Vec<f64> = (0..ind.model.n_dofs())
+            .filter(|&d| ind.model.is_free(d))
+            .map(|d| -asm.residual[d])
+            .collect();
+        linear.solve(n, &asm.tangent, &rhs).ok()
+    };
+    group.bench_function("newton_iteration_assemble_factor_solve", |b| {
+        b.iter(|| one_iteration(&mut linear))
     });
     group.finish();
 }
