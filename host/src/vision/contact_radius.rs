@@ -320,22 +320,38 @@ impl ContactRadiusEstimator {
         );
         let sat = f64::from(config.saturation_level);
         let w = reference.width();
-        let inv_reference = reference
+        let mirror_limit = mirror_level.min(sat);
+        let mut inv_reference: Vec<f32> = reference
             .pixels()
             .iter()
-            .enumerate()
-            .map(|(i, &v)| {
+            .map(|&v| {
                 let rv = f64::from(v);
-                let in_mirror = mirror_disc.is_some_and(|(mc, r2)| {
-                    ((i % w) as f64 - mc[0]).powi(2) + ((i / w) as f64 - mc[1]).powi(2) < r2
-                });
-                if rv >= sat || rv >= mirror_level || in_mirror {
+                if rv >= mirror_limit {
                     f32::NAN
                 } else {
                     (1.0 / rv.max(4.0)) as f32
                 }
             })
             .collect();
+        if let Some((mc, r2)) = mirror_disc {
+            // Mask the mirror's disc (with its rim margin) row by row.
+            let r = r2.sqrt();
+            let h = reference.height();
+            let y0 = (mc[1] - r).floor().max(0.0) as usize;
+            let y1 = ((mc[1] + r).ceil().max(0.0) as usize).min(h.saturating_sub(1));
+            for y in y0..=y1 {
+                let dy2 = (y as f64 - mc[1]).powi(2);
+                if dy2 >= r2 {
+                    continue;
+                }
+                let half = (r2 - dy2).sqrt();
+                let xa = (mc[0] - half).ceil().max(0.0) as usize;
+                let xb = ((mc[0] + half).floor().max(0.0) as usize).min(w.saturating_sub(1));
+                if xa <= xb {
+                    inv_reference[y * w + xa..=y * w + xb].fill(f32::NAN);
+                }
+            }
+        }
         Ok(Self {
             reference,
             blocks,
