@@ -66,6 +66,8 @@ pub struct Gap {
     pub normal: [f64; 2],
     /// Basis weights of the control points at the closest point.
     pub weights: [f64; 4],
+    /// |dc/dt| at the closest point (arc length per unit segment parameter).
+    pub speed: f64,
 }
 
 /// Closest-point projection of `xs` on the segment with control points `p`.
@@ -115,6 +117,7 @@ pub fn gap(xs: [f64; 2], p: &[[f64; 2]; 4]) -> Option<Gap> {
         t,
         normal,
         weights,
+        speed: tl,
     })
 }
 
@@ -225,6 +228,13 @@ pub struct ContactPair {
     pub multipliers: Vec<f64>,
     /// Gap width (mm) over which the force law is smoothed.
     pub smoothing_gap_mm: f64,
+    /// Coulomb friction coefficient (0: frictionless).
+    pub friction: f64,
+    /// Slip increment (mm) over which the regularised Coulomb law reaches its full value.
+    pub slip_regularisation_mm: f64,
+    /// Surface coordinate (segment index + parameter) of each slave's closest point at the
+    /// last converged step, `None` if it was not in contact.
+    previous_coordinate: Vec<Option<f64>>,
 }
 
 fn build_segments(masters: &[usize], nodes: &[[f64; 2]]) -> Vec<Segment> {
@@ -314,7 +324,104 @@ impl ContactPair {
             penalty_kpa_per_mm: penalty,
             multipliers: vec![0.0; n],
             smoothing_gap_mm,
+            friction: 0.0,
+            slip_regularisation_mm: 1e-4,
+            previous_coordinate: vec![None; n],
         }
+    }
+
+    /// Regularised Coulomb friction (Wriggers sec. 5.2, viscous-type regularisation of the
+    /// slip increment): with the slip `ds = (xi - xi_n) |c'|` of the slave along the master
+    /// since the last converged step, the tangential force on the slave is
+    /// `f_T = -mu f_N ds / sqrt(ds^2 + eps_s^2)` along the master tangent (and its reaction
+    /// on the master nodes). Returns the residual over the term's dofs.
+    fn friction_residual(
+        &self,
+        s: usize,
+        e: usize,
+        seg: &Segment,
+        xs: [f64; 2],
+        coords: &[[f64; 2]],
+    ) -> Option<Vec<f64>> {
+        let xi_n = self.previous_coordinate[s]?;
+        let (g, _) = self.gap_and_gradient(seg, xs, coords)?;
+        let stiff = self.penalty_kpa_per_mm * self.slave_areas_mm2[s];
+        let (f_n, _) = smooth_ramp(
+            self.multipliers[s] - stiff * g.gap_mm,
+            stiff * self.smoothing_gap_mm,
+        );
+        let slip = (e as f64 + g.t - xi_n) * g.speed;
+        let f_t = -self.friction * f_n * slip
+            / (slip * slip + self.slip_regularisation_mm.powi(2)).sqrt();
+        // tangential "gradient": the gap gradient with the normal replaced by the tangent
+        let tangent_gap = Gap {
+            normal: [g.normal[1], -g.normal[0]],
+            ..g
+        };
+        let dir = seg.gap_gradient(&tangent_gap);
+        Some(dir.iter().map(|d| -f_t * d).collect())
+    }
+
+    /// Friction residual and its tangent by central differences, symmetrised so that the
+    /// Cholesky solver can be kept (a deliberate approximation: Newton then converges
+    /// linearly instead of quadratically while slip is active).
+    fn friction_term(
+        &self,
+        s: usize,
+        e: usize,
+        seg: &Segment,
+        xs: [f64; 2],
+        coords: &[[f64; 2]],
+    ) -> Option<(Vec<f64>, Vec<f64>)> {
+        let r0 = self.friction_residual(s, e, seg, xs, coords)?;
+        let n = r0.len();
+        let step = 1e-7;
+        let mut k = vec![0.0; n * n];
+        for m in 0..n {
+            let perturbed = |delta: f64| {
+                let mut xs2 = xs;
+                let mut c2 = coords.to_vec();
+                if m < 2 {
+                    xs2[m] += delta;
+                } else {
+                    c2[(m - 2) / 2][m % 2] += delta;
+                }
+                self.friction_residual(s, e, seg, xs2, &c2)
+            };
+            let rp = perturbed(step)?;
+            let rm = perturbed(-step)?;
+            for a in 0..n {
+                k[a * n + m] = (rp[a] - rm[a]) / (2.0 * step);
+            }
+        }
+        for a in 0..n {
+            for b in 0..a {
+                let v = 0.5 * (k[a * n + b] + k[b * n + a]);
+                k[a * n + b] = v;
+                k[b * n + a] = v;
+            }
+        }
+        Some((r0, k))
+    }
+
+    /// Record every slave's closest-point surface coordinate at a converged state (the
+    /// reference of the next step's slip increments).
+    pub fn commit_slip_state(&mut self, position: &dyn Fn(usize) -> [f64; 2]) {
+        let coords: Vec<Option<f64>> = self
+            .slaves
+            .iter()
+            .enumerate()
+            .map(|(s, &slave)| {
+                let (e, g) = self.project(position(slave), position)?;
+                let stiff = self.penalty_kpa_per_mm * self.slave_areas_mm2[s];
+                let (f, _) = smooth_ramp(
+                    self.multipliers[s] - stiff * g.gap_mm,
+                    stiff * self.smoothing_gap_mm,
+                );
+                (f > 0.0).then_some(e as f64 + g.t)
+            })
+            .collect();
+        self.previous_coordinate = coords;
     }
 
     /// Closest master segment for a slave at `xs`: (segment index, gap).
@@ -437,6 +544,17 @@ impl ContactPair {
                 for b in 0..n {
                     tangent[a * n + b] =
                         stiff * slope * grad[a] * grad[b] - force * hess[a * n + b];
+                }
+            }
+            let mut residual = residual;
+            if self.friction > 0.0
+                && let Some((rf, kf)) = self.friction_term(s, e, seg, xs, &coords)
+            {
+                for (r, v) in residual.iter_mut().zip(&rf) {
+                    *r += v;
+                }
+                for (t, v) in tangent.iter_mut().zip(&kf) {
+                    *t += v;
                 }
             }
             let mut nodes = vec![slave];

@@ -182,11 +182,6 @@ pub fn validate(p: &CurveParams) -> Result<(), FemError> {
         (-3..=3).contains(&p.mesh_level),
         "must be in [-3, 3]",
     )?;
-    if p.friction > 0.0 {
-        return Err(FemError::Unsupported(
-            "friction > 0: this solver version implements frictionless contact only",
-        ));
-    }
     Ok(())
 }
 
@@ -278,6 +273,10 @@ impl Indentation {
                 penalty,
                 settings.contact_smoothing * settings.mesh.sample_fine_size_mm,
             ));
+            if let Some(c) = model.contact.as_mut() {
+                c.friction = params.friction;
+                c.slip_regularisation_mm = 1e-3 * settings.mesh.sample_fine_size_mm;
+            }
         }
         model.newton.max_correction_mm =
             settings.max_correction * settings.mesh.sample_fine_size_mm;
@@ -496,7 +495,7 @@ fn continuation(
     state: &mut Vec<f64>,
     mut solve: impl FnMut(f64, &mut Vec<f64>) -> Result<(), NewtonFailure>,
     mut on_failure_restore: impl FnMut(),
-    mut on_success_commit: impl FnMut(&[f64]),
+    mut on_success_commit: impl FnMut(&[f64], &[f64]),
     stage: &'static str,
     unit: &'static str,
 ) -> Result<(), FemError> {
@@ -508,7 +507,7 @@ fn continuation(
         let mut trial = state.clone();
         match solve(target, &mut trial) {
             Ok(()) => {
-                on_success_commit(state);
+                on_success_commit(state, &trial);
                 *state = trial;
                 done = target;
                 if cuts > 0 {
@@ -574,7 +573,7 @@ pub fn solve_curve_state(
             &mut u,
             |p, state| cell.borrow_mut().solve_equilibrium(state, p).map(|_| ()),
             || {},
-            |_: &[f64]| {},
+            |_: &[f64], _: &[f64]| {},
             "stage 1 (inflation)",
             "kPa",
         )?;
@@ -616,11 +615,17 @@ pub fn solve_curve_state(
                     c.multipliers.clone_from(saved);
                 }
             },
-            |before: &[f64]| {
+            |before: &[f64], after: &[f64]| {
                 let mut ind = ind_cell.borrow_mut();
                 *committed.borrow_mut() = ind.model.contact.as_ref().map(|c| c.multipliers.clone());
                 let h_before = ind.clamp_z_dofs.first().map_or(0.0, |&d| -before[d]);
                 ind.previous = Some((h_before, before.to_vec()));
+                let positions: Vec<[f64; 2]> = (0..ind.model.mesh.nodes.len())
+                    .map(|n| ind.model.position(after, n))
+                    .collect();
+                if let Some(c) = ind.model.contact.as_mut() {
+                    c.commit_slip_state(&|n: usize| positions[n]);
+                }
             },
             "stage 2 (indentation)",
             "mm of tube travel",
