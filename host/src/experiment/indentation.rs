@@ -323,7 +323,27 @@ pub fn run_indentation(
             k += 1;
         }
         let last = k.min(disp.len() - 1);
-        let ds = &disp[first..=last];
+        // u_s is zero at the pressurised pre-contact state (paper eq. 6): tare it with the
+        // samples at the start position just before this cycle (the calibration's zero,
+        // taken on another day or sample, may differ by tens of micrometres).
+        let before: Vec<f64> = disp[first.saturating_sub(400)..=first]
+            .iter()
+            .filter(|d| !beyond(d))
+            .map(|d| d.u_s_mm)
+            .collect();
+        let zero = if before.is_empty() {
+            0.0
+        } else {
+            before.iter().sum::<f64>() / before.len() as f64
+        };
+        let ds: Vec<DisplacementSample> = disp[first..=last]
+            .iter()
+            .map(|d| DisplacementSample {
+                u_s_mm: d.u_s_mm - zero,
+                ..*d
+            })
+            .collect();
+        let ds = &ds[..];
         let (a, b) = (ds[0].host_time_us, ds[ds.len() - 1].host_time_us);
         let fs: Vec<RadiusSample> = frames
             .iter()

@@ -499,7 +499,7 @@ pub fn run_demo_with(scenario: Scenario, options: &DemoOptions) -> Result<DemoRe
     };
 
     // 1. camera scale
-    let px = px_per_mm_from_reference_disc(&scenario, &[1.0, 2.5])?;
+    let px = px_per_mm_from_reference_disc(&scenario, &[1.2, 2.0, 2.8, 3.4])?;
     // 2. proximity parabola on a rigid sample (no faults during calibration)
     let mut rigid = scenario.clone();
     rigid.name = format!("{}-rigid-calibration", scenario.name);
@@ -562,7 +562,7 @@ pub fn run_demo_with(scenario: Scenario, options: &DemoOptions) -> Result<DemoRe
         depth_mm: 1.7,
         speed_mm_per_s: 2.0,
         repeats: options.repeats,
-        stream_rate_hz: 1000,
+        stream_rate_hz: 2000,
     };
     let run = super::run_indentation(
         &mut link,
