@@ -52,6 +52,10 @@ pub enum ExperimentError {
     },
     #[error("the stage did not reach {target_mm:.3} mm within {seconds:.1} s")]
     StageTimeout { target_mm: f64, seconds: f64 },
+    #[error(
+        "{port}: the device stopped sending ({silent_s:.1} s without a sample while streaming): unplugged or hung; everything received is in the record"
+    )]
+    DeviceSilent { port: String, silent_s: f64 },
     #[error("device fault during the experiment: flags {0:#06x}")]
     Fault(u16),
 }
@@ -90,6 +94,7 @@ fn displacement(
 struct Streams {
     samples: StreamCsv,
     frames: StreamCsv,
+    last_sample_us: u64,
 }
 
 fn collect(
@@ -101,7 +106,22 @@ fn collect(
     duration: Duration,
 ) -> Result<(), ExperimentError> {
     let r = link.pump(duration);
-    for s in link.drain_samples() {
+    let fresh = link.drain_samples();
+    let now = host_clock::now_us();
+    if fresh.is_empty() {
+        let silent_s = (now.saturating_sub(streams.last_sample_us)) as f64 * 1e-6;
+        if silent_s > 1.5 {
+            streams.samples.flush()?;
+            streams.frames.flush()?;
+            return Err(ExperimentError::DeviceSilent {
+                port: link.port_name(),
+                silent_s,
+            });
+        }
+    } else {
+        streams.last_sample_us = now;
+    }
+    for s in fresh {
         let x = &s.sample;
         streams.samples.append(&format!(
             "{},{:.1},{},{},{},{},{},{}",
@@ -199,6 +219,7 @@ pub fn run_indentation(
             "device_time_us,host_time_us,proximity_counts,manometer_counts,load_counts,pump_duty_per_10k,stage_steps,status",
         )?,
         frames: record.stream("frames.csv", "host_time_us,a_mm")?,
+        last_sample_us: host_clock::now_us(),
     };
     let mut samples = Vec::new();
     let mut frames = Vec::new();
