@@ -1,0 +1,130 @@
+//! The shipped default table, fem-core/data/default.lut: it verifies (format version and
+//! content hash), covers the axes the issue requires, and — the slow `#[ignore]` test —
+//! regenerating a sample of its curves with the recorded parameters, mesh level and solver
+//! settings reproduces the stored numbers. Run the slow test with
+//! `cargo test -p fem-core --release --test lut_shipped -- --ignored`.
+
+// Test helpers outside #[test] functions may unwrap too (COMMON.md: tests may unwrap).
+#![allow(clippy::unwrap_used)]
+
+use fem_core::lut::{
+    EffectSelection, LutFile, LutQuery, OutOfRange, fem_solver_description, read_lut,
+};
+use std::path::PathBuf;
+
+fn shipped() -> LutFile {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data/default.lut");
+    read_lut(&path).unwrap()
+}
+
+#[test]
+fn shipped_table_verifies_and_covers_the_required_axes() {
+    let f = shipped();
+    let g = &f.lut.grid;
+    assert!(f.lut.shard.is_none());
+    assert!(
+        f.size_bytes < 3_000_000,
+        "a few MB at most: {}",
+        f.size_bytes
+    );
+    assert!(g.modulus_kpa[0] <= 10.0 && *g.modulus_kpa.last().unwrap() >= 1000.0);
+    for p in [0.0, 6.0, 10.0, 15.0, 20.0, 30.0] {
+        assert!(g.pressure_kpa.contains(&p), "p_air {p} missing");
+    }
+    // log-spaced E2
+    let ratios: Vec<f64> = g.modulus_kpa.windows(2).map(|w| w[1] / w[0]).collect();
+    assert!(ratios.iter().all(|r| (r / ratios[0] - 1.0).abs() < 1e-3));
+    assert_eq!(f.header.mesh.mesh_level, g.base.mesh_level);
+    assert!(
+        f.lut.solver.starts_with("fem_core::solve_curve"),
+        "{}",
+        f.lut.solver
+    );
+}
+
+#[test]
+fn shipped_table_answers_queries_in_the_papers_range() {
+    // The paper's gelatin experiments: E2 ~ 140-260 kPa, p_air 6 kPa, u_s up to ~0.5 mm.
+    let f = shipped();
+    let slice = f.lut.slice(&EffectSelection::default()).unwrap();
+    let mut prev = f64::INFINITY;
+    for e in [140.0, 170.0, 200.0, 230.0, 260.0] {
+        let s = slice
+            .sample(
+                &LutQuery {
+                    modulus_kpa: e,
+                    pressure_kpa: 6.0,
+                    u_s_mm: 0.3,
+                },
+                OutOfRange::Error,
+            )
+            .unwrap();
+        // a stiffer sample deforms the shell more at the same tube travel, so at a given u_s
+        // the contact is smaller: a decreases with E2
+        assert!(
+            s.a_mm > 0.5 && s.a_mm < 5.0 && s.a_mm < prev,
+            "E2 {e}: a {}",
+            s.a_mm
+        );
+        assert!(s.da_dln_modulus_mm < 0.0);
+        prev = s.a_mm;
+    }
+}
+
+#[test]
+#[ignore = "slow: re-solves sample curves at the production mesh; run in release"]
+fn regenerating_sample_curves_reproduces_the_stored_ones() {
+    let f = shipped();
+    let lut = &f.lut;
+    // The settings the table was built with must be the solver's current ones, or the
+    // table is stale and must be rebuilt (`tactile lut build --out fem-core/data/default.lut`).
+    assert_eq!(
+        lut.solver,
+        fem_solver_description(lut.grid.base.mesh_level),
+        "solver settings changed since the shipped table was built"
+    );
+    let ok: Vec<usize> = lut
+        .curves
+        .iter()
+        .filter(|c| c.failure.is_none())
+        .map(|c| c.index)
+        .collect();
+    // first, middle and last successful curves: soft/low pressure to stiff/high pressure
+    let sample = [ok[0], ok[ok.len() / 2], ok[ok.len() - 1]];
+    for index in sample {
+        let params = lut.grid.curve_params(index);
+        let stored = lut.curve(index).unwrap();
+        let curve = fem_core::solve_curve(&params).unwrap();
+        assert_eq!(curve.points.len(), stored.len(), "curve {index}");
+        // Same code and settings: differences can only come from floating-point summation
+        // order on another CPU (faer picks SIMD paths at run time), which moves the Newton
+        // iterates by far less than 1e-5 mm; the mesh discretisation error is ~1e-2 mm, so
+        // this still catches any change of the model.
+        for (k, p) in curve.points.iter().enumerate() {
+            let what = format!("curve {index} ({}), step {k}", lut.grid.describe(index));
+            assert!((p.h_mm - stored.h_mm[k]).abs() < 1e-12, "{what}: h");
+            assert!(
+                (p.u_s_mm - stored.u_s_mm[k]).abs() < 1e-5,
+                "{what}: u_s {} vs {}",
+                p.u_s_mm,
+                stored.u_s_mm[k]
+            );
+            assert!(
+                (p.a_mm - stored.a_mm[k]).abs() < 1e-5,
+                "{what}: a {} vs {}",
+                p.a_mm,
+                stored.a_mm[k]
+            );
+            assert!(
+                (p.load_n - stored.load_n[k]).abs() < 1e-5 * stored.load_n[k].abs().max(1e-3),
+                "{what}: P {} vs {}",
+                p.load_n,
+                stored.load_n[k]
+            );
+            assert!(
+                (p.volume_mm3 - stored.volume_mm3[k]).abs() < 1e-4,
+                "{what}: volume"
+            );
+        }
+    }
+}
