@@ -478,7 +478,7 @@ pub fn run_demo_with(scenario: Scenario, options: &DemoOptions) -> Result<DemoRe
     let lut_path = options.lut.clone().unwrap_or_else(fixture_lut_path);
     if options.lut.is_none() {
         notes.push(format!(
-            "fit table: {} (mesh level -2 fixture; no production table is shipped yet)",
+            "fit table: {} (mesh level -2 fixture table, matching the mesh level -2 curves hil-sim simulates; the shipped production table fem-core/data/default.lut is not used by the demo yet)",
             lut_path.display()
         ));
     }
