@@ -29,8 +29,9 @@ fn options(name: &str, modulus: f64, repeats: u32) -> DemoOptions {
 }
 
 /// The acceptance criterion: within 2 % with the interval covering the truth.
-/// KNOWN TO FAIL at the time of writing: the demo measures about 7 % low at 200 kPa (see
-/// the report: a camera-to-stream timing lag and a radius bias of ~0.02 mm remain).
+/// KNOWN TO FAIL at the time of writing: the demo reads 3-6 % high at 60-200 kPa with an
+/// interval that misses the truth (README, "Status"); suspected cause: the proximity
+/// calibration takes u_s = h on the rigid sample.
 #[test]
 #[ignore = "real-time hil-sim run (~25 s each); release"]
 fn demo_recovers_the_modulus_within_2_percent() {
