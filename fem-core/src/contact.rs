@@ -374,33 +374,9 @@ impl ContactPair {
         coords: &[[f64; 2]],
     ) -> Option<(Vec<f64>, Vec<f64>)> {
         let r0 = self.friction_residual(s, e, seg, xs, coords)?;
-        let n = r0.len();
-        let step = 1e-7;
-        let mut k = vec![0.0; n * n];
-        for m in 0..n {
-            let perturbed = |delta: f64| {
-                let mut xs2 = xs;
-                let mut c2 = coords.to_vec();
-                if m < 2 {
-                    xs2[m] += delta;
-                } else {
-                    c2[(m - 2) / 2][m % 2] += delta;
-                }
-                self.friction_residual(s, e, seg, xs2, &c2)
-            };
-            let rp = perturbed(step)?;
-            let rm = perturbed(-step)?;
-            for a in 0..n {
-                k[a * n + m] = (rp[a] - rm[a]) / (2.0 * step);
-            }
-        }
-        for a in 0..n {
-            for b in 0..a {
-                let v = 0.5 * (k[a * n + b] + k[b * n + a]);
-                k[a * n + b] = v;
-                k[b * n + a] = v;
-            }
-        }
+        let k = symmetric_central_jacobian(xs, coords, |xs2, c2| {
+            self.friction_residual(s, e, seg, xs2, c2)
+        })?;
         Some((r0, k))
     }
 
@@ -483,34 +459,9 @@ impl ContactPair {
 
     /// Hessian of the gap by central differences of the analytic gradient, symmetrised.
     fn gap_hessian(&self, seg: &Segment, xs: [f64; 2], coords: &[[f64; 2]]) -> Option<Vec<f64>> {
-        let n = 2 + 2 * coords.len();
-        let step = 1e-7;
-        let mut h = vec![0.0; n * n];
-        for m in 0..n {
-            let perturbed = |delta: f64| {
-                let mut xs2 = xs;
-                let mut c2 = coords.to_vec();
-                if m < 2 {
-                    xs2[m] += delta;
-                } else {
-                    c2[(m - 2) / 2][m % 2] += delta;
-                }
-                self.gap_and_gradient(seg, xs2, &c2).map(|(_, g)| g)
-            };
-            let gp = perturbed(step)?;
-            let gm = perturbed(-step)?;
-            for k in 0..n {
-                h[k * n + m] = (gp[k] - gm[k]) / (2.0 * step);
-            }
-        }
-        for a in 0..n {
-            for b in 0..a {
-                let s = 0.5 * (h[a * n + b] + h[b * n + a]);
-                h[a * n + b] = s;
-                h[b * n + a] = s;
-            }
-        }
-        Some(h)
+        symmetric_central_jacobian(xs, coords, |xs2, c2| {
+            self.gap_and_gradient(seg, xs2, c2).map(|(_, g)| g)
+        })
     }
 
     /// Active contact terms at the current configuration.
@@ -609,6 +560,45 @@ impl ContactPair {
         }
         max_pen
     }
+}
+
+/// Jacobian of `f` with respect to the slave position `xs` followed by the segment's nodal
+/// coordinates (in that order, x before z), by central differences with a step of 1e-7 mm,
+/// then symmetrised as (J + J^T) / 2. `f` returns a vector of the same length as the
+/// unknowns (2 + 2 * coords.len()); `None` from any evaluation propagates.
+fn symmetric_central_jacobian(
+    xs: [f64; 2],
+    coords: &[[f64; 2]],
+    f: impl Fn([f64; 2], &[[f64; 2]]) -> Option<Vec<f64>>,
+) -> Option<Vec<f64>> {
+    let n = 2 + 2 * coords.len();
+    let step = 1e-7;
+    let mut jac = vec![0.0; n * n];
+    for m in 0..n {
+        let perturbed = |delta: f64| {
+            let mut xs2 = xs;
+            let mut c2 = coords.to_vec();
+            if m < 2 {
+                xs2[m] += delta;
+            } else {
+                c2[(m - 2) / 2][m % 2] += delta;
+            }
+            f(xs2, &c2)
+        };
+        let fp = perturbed(step)?;
+        let fm = perturbed(-step)?;
+        for a in 0..n {
+            jac[a * n + m] = (fp[a] - fm[a]) / (2.0 * step);
+        }
+    }
+    for a in 0..n {
+        for b in 0..a {
+            let v = 0.5 * (jac[a * n + b] + jac[b * n + a]);
+            jac[a * n + b] = v;
+            jac[b * n + a] = v;
+        }
+    }
+    Some(jac)
 }
 
 #[cfg(test)]
