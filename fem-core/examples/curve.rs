@@ -1,5 +1,5 @@
 //! Solve one a–u_s curve and print it: `cargo run -p fem-core --release --example curve --
-//! [modulus_kpa] [pressure_kpa] [mesh_level] [steps] [depth_mm] [friction]`.
+//! [modulus_kpa] [pressure_kpa] [mesh_level] [steps] [depth_mm] [friction] [stiffening]`.
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<f64> = std::env::args()
@@ -14,6 +14,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         steps: get(3, 40.0) as usize,
         max_depth_mm: get(4, 2.0),
         friction: get(5, 0.0),
+        sample_stiffening: get(6, 0.0),
         ..Default::default()
     };
     let curve = fem_core::solve_curve(&params)?;

@@ -37,6 +37,13 @@ pub struct CurveParams {
     pub friction: f64,
     /// Material law used for both bodies.
     pub material: MaterialLaw,
+    /// Strain stiffening of the sample, the Yeoh ratio `beta = c2/c1` (dimensionless, at
+    /// least 0): `W = mu2/2 [(I1b - 3) + beta (I1b - 3)^2] + U(J)` (see [`crate::material`]).
+    /// 0 is the neo-Hookean baseline (bit for bit); the small-strain modulus stays E2.
+    /// Only the neo-Hookean law uses it; files written before it existed read as 0, and 0
+    /// is not written, so such files keep their bytes.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub sample_stiffening: f64,
     /// Final tube travel h of stage 2.
     pub max_depth_mm: f64,
     /// Number of equal load steps from h = 0 to `max_depth_mm` (the solver may cut steps
@@ -59,11 +66,17 @@ impl Default for CurveParams {
             pressure_kpa: 6.0,
             friction: 0.0,
             material: MaterialLaw::NeoHookean,
+            sample_stiffening: 0.0,
             max_depth_mm: 2.0,
             steps: 40,
             mesh_level: 0,
         }
     }
+}
+
+/// serde helper: omit a parameter that has its neutral value 0.
+pub(crate) fn is_zero(x: &f64) -> bool {
+    *x == 0.0
 }
 
 /// One sample of the contact pressure along the deformed sample surface.

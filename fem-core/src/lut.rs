@@ -1,5 +1,6 @@
 //! Lookup tables (LUT) of simulated a–u_s curves over a grid of sample modulus E2, internal
-//! pressure p_air and optional effect axes (sample thickness, friction, material law).
+//! pressure p_air and optional effect axes (sample thickness, friction, material law, sample
+//! strain stiffening).
 //!
 //! - [`grid`]: the grid ([`LutGrid`]), its deterministic curve order and the named grids;
 //! - [`table`]: the in-memory table ([`Lut`], [`LutCurve`]) and shard merging;
@@ -21,6 +22,6 @@ pub use error::LutError;
 pub use format::{
     LUT_FORMAT_VERSION, LUT_MAGIC, LutFile, read_lut, read_lut_bytes, write_lut, write_lut_bytes,
 };
-pub use grid::{EffectAxes, EffectSelection, GridIndex, LutGrid, Shard};
+pub use grid::{EffectAxes, EffectSelection, GridIndex, LutGrid, Shard, log_spaced};
 pub use interp::{LutQuery, LutSample, LutSlice, OutOfRange};
 pub use table::{Lut, LutCurve, merge_shards};

@@ -12,6 +12,11 @@
 //! - neo-Hookean: `W_dev = mu/2 (J^{-2/3} I1 - 3)`, `theta = J - 1`, which for the exact
 //!   pressure `p = kappa (J - 1)` is the compressible neo-Hookean model with
 //!   `U(J) = kappa/2 (J - 1)^2`;
+//! - with strain stiffening `beta > 0` (sample only): the compressible Yeoh law (Yeoh 1993,
+//!   two terms) `W_dev = mu/2 [(I1b - 3) + beta (I1b - 3)^2]`, `I1b = J^{-2/3} I1`, i.e.
+//!   `c1 = mu/2`, `c2/c1 = beta`. The initial shear modulus stays `mu` (so E keeps its
+//!   small-strain meaning); the tangent shear modulus grows as `mu (1 + 2 beta (I1b - 3))`.
+//!   `beta = 0` is exactly the neo-Hookean law (same arithmetic, see [`respond`]);
 //! - linear (small strain): `W_dev = mu eps_dev : eps_dev`, `theta = tr eps`.
 //!
 //! With `mu = E / (2 (1 + nu))` and `kappa = E / (3 (1 - 2 nu))` both reduce to Hooke's law
@@ -33,6 +38,9 @@ pub struct Material {
     /// Bulk modulus.
     pub kappa_kpa: f64,
     pub law: MaterialLaw,
+    /// Yeoh strain-stiffening ratio `beta = c2/c1` (dimensionless, >= 0; 0 = neo-Hookean).
+    /// Ignored by the linear law.
+    pub stiffening: f64,
 }
 
 impl Material {
@@ -42,6 +50,15 @@ impl Material {
             mu_kpa: e_kpa / (2.0 * (1.0 + nu)),
             kappa_kpa: e_kpa / (3.0 * (1.0 - 2.0 * nu)),
             law,
+            stiffening: 0.0,
+        }
+    }
+
+    /// The same material with the Yeoh stiffening ratio `beta = c2/c1` (see the module docs).
+    pub fn with_stiffening(self, beta: f64) -> Self {
+        Self {
+            stiffening: beta,
+            ..self
         }
     }
 }
@@ -64,7 +81,7 @@ pub struct PointResponse {
 /// Evaluate the constitutive response for the gradient `h` and the pressure `p`.
 pub fn respond(mat: &Material, h: &[f64; 5], p: f64) -> PointResponse {
     match mat.law {
-        MaterialLaw::NeoHookean => neo_hookean(mat.mu_kpa, h, p),
+        MaterialLaw::NeoHookean => neo_hookean(mat.mu_kpa, mat.stiffening, h, p),
         MaterialLaw::Linear => linear(mat.mu_kpa, h, p),
     }
 }
@@ -104,7 +121,14 @@ fn linear(mu: f64, h: &[f64; 5], p: f64) -> PointResponse {
     }
 }
 
-fn neo_hookean(mu: f64, h: &[f64; 5], p: f64) -> PointResponse {
+/// Neo-Hookean (`beta = 0`) or two-term Yeoh (`beta > 0`) deviatoric response plus the
+/// volumetric pressure term. With `psi1 = dW/dI1b = mu/2 (1 + 2 beta (I1b - 3))` and
+/// `G = dI1b/dF / 2 = J^{-2/3} (F - I1/3 F^{-T})`:
+/// `P = 2 psi1 G + p J F^{-T}`,
+/// `dP/dF = 2 psi1 dG/dF + 4 mu beta G (x) G + p d2J/dF2`.
+/// For `beta = 0`, `2 psi1 = mu * 1.0 = mu` exactly and the extra term is skipped, so the
+/// result is bit for bit the neo-Hookean one.
+fn neo_hookean(mu: f64, beta: f64, h: &[f64; 5], p: f64) -> PointResponse {
     // full 3x3 F and its inverse (block diagonal: 2x2 in (r, z) plus the hoop stretch)
     let mut f = [[0.0; 3]; 3];
     f[0][0] = 1.0 + h[0];
@@ -122,7 +146,13 @@ fn neo_hookean(mu: f64, h: &[f64; 5], p: f64) -> PointResponse {
     finv[2][2] = 1.0 / f[2][2];
     let i1: f64 = f.iter().flatten().map(|x| x * x).sum();
     let jm23 = j.abs().powf(-2.0 / 3.0);
-    let c = mu * jm23;
+    // 2 psi1: the neo-Hookean mu, times the Yeoh factor 1 + 2 beta (I1b - 3)
+    let mu_eff = if beta == 0.0 {
+        mu
+    } else {
+        mu * (1.0 + 2.0 * beta * (jm23 * i1 - 3.0))
+    };
+    let c = mu_eff * jm23;
 
     let mut stress = [0.0; 5];
     let mut tangent = [[0.0; 5]; 5];
@@ -140,6 +170,18 @@ fn neo_hookean(mu: f64, h: &[f64; 5], p: f64) -> PointResponse {
             // d2J/dF2 = J (F^{-1}_Lk F^{-1}_Ji - F^{-1}_Jk F^{-1}_Li)
             let vol = p * j * (finv[l][k] * finv[jj][i] - finv[jj][k] * finv[l][i]);
             tangent[a][b] = iso + vol;
+        }
+    }
+    if beta != 0.0 {
+        // 4 mu beta G (x) G, G = J^{-2/3} (F - I1/3 F^{-T})
+        let g: [f64; 5] = std::array::from_fn(|a| {
+            let (i, jj) = COMPONENTS[a];
+            jm23 * (f[i][jj] - i1 / 3.0 * finv[jj][i])
+        });
+        for a in 0..5 {
+            for b in 0..5 {
+                tangent[a][b] += 4.0 * mu * beta * g[a] * g[b];
+            }
         }
     }
     PointResponse {
@@ -180,6 +222,133 @@ mod tests {
                     base.tangent[a][b]
                 );
             }
+        }
+    }
+
+    /// Strain energy of the (stiffened) neo-Hookean law plus `p theta`, written directly from
+    /// the module-level formula (independent of the stress code).
+    fn energy(mat: &Material, h: &[f64; 5], p: f64) -> f64 {
+        let f = [1.0 + h[0], h[1], h[2], 1.0 + h[3], 1.0 + h[4]];
+        let j = (f[0] * f[3] - f[1] * f[2]) * f[4];
+        let i1: f64 = f.iter().map(|x| x * x).sum();
+        let d = j.powf(-2.0 / 3.0) * i1 - 3.0;
+        mat.mu_kpa / 2.0 * (d + mat.stiffening * d * d) + p * (j - 1.0)
+    }
+
+    #[test]
+    fn stiffened_stress_is_the_energy_gradient() {
+        for beta in [0.0, 0.7, 5.0] {
+            let mat = Material::from_young_poisson(200.0, 0.499, MaterialLaw::NeoHookean)
+                .with_stiffening(beta);
+            let h = [0.21, -0.09, 0.04, -0.27, 0.12];
+            let p = -11.0;
+            let base = respond(&mat, &h, p);
+            let step = 1e-6;
+            for a in 0..5 {
+                let mut hp = h;
+                let mut hm = h;
+                hp[a] += step;
+                hm[a] -= step;
+                let fd = (energy(&mat, &hp, p) - energy(&mat, &hm, p)) / (2.0 * step);
+                // central difference of an O(100 kPa) energy: truncation ~1e-10, round-off
+                // ~1e-16 * 100 / 1e-6 = 1e-8 kPa
+                assert!(
+                    (fd - base.stress[a]).abs() < 1e-6 * (1.0 + fd.abs()),
+                    "beta {beta}: stress[{a}] = {} vs dW/dH {fd}",
+                    base.stress[a]
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn stiffened_tangent_matches_finite_differences() {
+        let mat = Material::from_young_poisson(2300.0, 0.49, MaterialLaw::NeoHookean)
+            .with_stiffening(3.0);
+        let h = [0.11, -0.07, 0.05, -0.13, 0.08];
+        let base = respond(&mat, &h, 37.0);
+        let step = 1e-6;
+        for b in 0..5 {
+            let mut hp = h;
+            let mut hm = h;
+            hp[b] += step;
+            hm[b] -= step;
+            let (rp, rm) = (respond(&mat, &hp, 37.0), respond(&mat, &hm, 37.0));
+            for a in 0..5 {
+                let fd = (rp.stress[a] - rm.stress[a]) / (2.0 * step);
+                // as in energy_fd_check: central differences, ~1e-9 relative error
+                assert!(
+                    (fd - base.tangent[a][b]).abs() < 1e-6 * (1.0 + fd.abs()),
+                    "tangent[{a}][{b}] = {} vs fd {fd}",
+                    base.tangent[a][b]
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn zero_stiffening_is_neo_hookean_bit_for_bit_and_small_beta_is_continuous() {
+        let nh = Material::from_young_poisson(150.0, 0.499, MaterialLaw::NeoHookean);
+        let h = [0.3, -0.1, 0.2, -0.25, 0.15];
+        let a = respond(&nh, &h, 4.0);
+        let b = respond(&nh.with_stiffening(0.0), &h, 4.0);
+        assert_eq!(a.stress, b.stress);
+        assert_eq!(a.tangent, b.tangent);
+        // d stress / d beta is finite: beta = 1e-9 moves the stress by O(1e-9 mu)
+        let c = respond(&nh.with_stiffening(1e-9), &h, 4.0);
+        for i in 0..5 {
+            let d = (c.stress[i] - a.stress[i]).abs();
+            assert!(
+                d > 0.0 || a.stress[i] == 0.0 || h[i] == 0.0,
+                "{i}: no effect"
+            );
+            assert!(d < 1e-6 * nh.mu_kpa, "{i}: {d}");
+        }
+    }
+
+    #[test]
+    fn uniaxial_tension_and_compression_match_the_incompressible_yeoh_closed_form() {
+        // Incompressible two-term Yeoh in uniaxial stress (stretch l along z, 1/sqrt(l)
+        // laterally): nominal stress P = 2 (l - l^-2) (c1 + 2 c2 (I1 - 3)),
+        // I1 = l^2 + 2/l, with c1 = mu/2, c2 = beta c1. The compressible law with
+        // kappa/mu = 1e6 must agree to O(mu_t/kappa), mu_t <= ~10 mu the stiffened tangent
+        // shear modulus at l = 1.8 (measured 1.1e-4 relative at kappa/mu = 1e5).
+        let beta = 2.0;
+        let mat = Material {
+            mu_kpa: 100.0,
+            kappa_kpa: 1e8,
+            law: MaterialLaw::NeoHookean,
+            stiffening: beta,
+        };
+        for l in [0.6, 0.8, 1.0 + 1e-3, 1.3, 1.8] {
+            // lateral stretch s and the pressure p = kappa (J - 1) such that the lateral
+            // stress vanishes (Newton on s, derivative by central differences)
+            let lateral = |s: f64| {
+                let h = [s - 1.0, 0.0, 0.0, l - 1.0, s - 1.0];
+                let j = s * s * l;
+                let r = respond(&mat, &h, mat.kappa_kpa * (j - 1.0));
+                (r.stress[0], r.stress[3])
+            };
+            let mut s = 1.0 / l.sqrt();
+            for _ in 0..50 {
+                let (f0, _) = lateral(s);
+                let ds = 1e-9;
+                let df = (lateral(s + ds).0 - lateral(s - ds).0) / (2.0 * ds);
+                let step = f0 / df;
+                s -= step;
+                if step.abs() < 1e-15 {
+                    break;
+                }
+            }
+            let (_, p_zz) = lateral(s);
+            let i1 = l * l + 2.0 / l;
+            let c1 = mat.mu_kpa / 2.0;
+            let exact = 2.0 * (l - l.powi(-2)) * (c1 + 2.0 * beta * c1 * (i1 - 3.0));
+            let neo = 2.0 * (l - l.powi(-2)) * c1;
+            assert!(
+                (p_zz - exact).abs() < 1e-4 * exact.abs(),
+                "stretch {l}: P_zz {p_zz} vs Yeoh {exact} (neo-Hookean would be {neo})"
+            );
         }
     }
 

@@ -165,6 +165,19 @@ pub fn validate(p: &CurveParams) -> Result<(), FemError> {
     )?;
     check("friction", p.friction, p.friction >= 0.0, "must be >= 0")?;
     check(
+        "sample_stiffening",
+        p.sample_stiffening,
+        (0.0..=100.0).contains(&p.sample_stiffening),
+        "must be in [0, 100] (Yeoh c2/c1; 0 = neo-Hookean)",
+    )?;
+    if p.sample_stiffening != 0.0 && p.material != crate::curve::MaterialLaw::NeoHookean {
+        return Err(FemError::InvalidParameter {
+            field: "sample_stiffening",
+            value: p.sample_stiffening,
+            reason: "strain stiffening needs the neo-hookean material law",
+        });
+    }
+    check(
         "max_depth_mm",
         p.max_depth_mm,
         (0.0..=3.0).contains(&p.max_depth_mm),
@@ -244,7 +257,8 @@ impl Indentation {
                 params.sample_modulus_kpa,
                 params.sample_poisson,
                 params.material,
-            ),
+            )
+            .with_stiffening(params.sample_stiffening),
         ];
         let mut model = Model::new(mesh, materials, settings.formulation);
         let mut fixed: Vec<usize> = shell.axis.iter().map(|&n| 2 * n).collect();

@@ -19,6 +19,22 @@ fn inflate_sphere(
     formulation: Formulation,
     ramp_steps: usize,
 ) -> (f64, f64) {
+    inflate_sphere_with(
+        Material::from_young_poisson(2300.0, nu, law),
+        pressure_kpa,
+        divisions,
+        formulation,
+        ramp_steps,
+    )
+}
+
+fn inflate_sphere_with(
+    material: Material,
+    pressure_kpa: f64,
+    divisions: ShellDivisions,
+    formulation: Formulation,
+    ramp_steps: usize,
+) -> (f64, f64) {
     let mut mesh = Mesh::default();
     let shell = add_shell(
         &mut mesh,
@@ -30,11 +46,7 @@ fn inflate_sphere(
         &divisions,
         0,
     );
-    let mut model = Model::new(
-        mesh,
-        vec![Material::from_young_poisson(2300.0, nu, law)],
-        formulation,
-    );
+    let mut model = Model::new(mesh, vec![material], formulation);
     let mut fixed: Vec<usize> = shell.axis.iter().map(|&n| 2 * n).collect();
     fixed.extend(shell.equator.iter().map(|&n| 2 * n + 1));
     model.fix_all(fixed);
@@ -207,4 +219,76 @@ fn clamped_shell_bending_does_not_lock_with_the_mixed_element() {
         "displacement element did not lock"
     );
     assert!(displ.1 < mixed.1 * 0.99);
+}
+
+/// Exact inflation pressure of an incompressible thick sphere (inner radius A = 4.6 mm,
+/// outer B = 5 mm) of a two-term Yeoh material, `W = c1 (I1 - 3) + c2 (I1 - 3)^2` with
+/// `c1 = mu/2`, `c2 = beta c1`, when the inner radius has grown by `du` (mm):
+/// `p = int_a^b (sigma_tt - sigma_rr) 2/r dr`, with `sigma_tt - sigma_rr
+/// = 2 dW/dI1 (l^2 - l^-4) = mu (1 + 2 beta (I1 - 3)) (l^2 - l^-4)`, hoop stretch
+/// `l = r/R`, `I1 = 2 l^2 + l^-4`, `r^3 = R^3 + a^3 - A^3` (Ogden, "Non-linear elastic
+/// deformations", sec. 5.3). Composite Simpson over the reference radius R.
+fn yeoh_sphere_pressure_kpa(mu: f64, beta: f64, du: f64) -> f64 {
+    let (ai, bo): (f64, f64) = (4.6, 5.0);
+    let c = (ai + du).powi(3) - ai.powi(3);
+    let n = 2000;
+    let h = (bo - ai) / n as f64;
+    let f = |rr: f64| {
+        let r = (rr.powi(3) + c).cbrt();
+        let lam = r / rr;
+        let i1 = 2.0 * lam * lam + lam.powi(-4);
+        let diff = mu * (1.0 + 2.0 * beta * (i1 - 3.0)) * (lam * lam - lam.powi(-4));
+        diff * 2.0 / r * (rr / r).powi(2)
+    };
+    let mut s = f(ai) + f(bo);
+    for k in 1..n {
+        s += f(ai + k as f64 * h) * if k % 2 == 1 { 4.0 } else { 2.0 };
+    }
+    s * h / 3.0
+}
+
+/// Inner-radius growth (mm) of the exact Yeoh sphere at pressure `p_kpa` (bisection on the
+/// monotone pressure–radius relation; stiffening rules out a limit point).
+fn yeoh_sphere_inflation_mm(mu: f64, beta: f64, p_kpa: f64) -> f64 {
+    let (mut lo, mut hi) = (0.0, 3.0);
+    for _ in 0..80 {
+        let mid = 0.5 * (lo + hi);
+        if yeoh_sphere_pressure_kpa(mu, beta, mid) < p_kpa {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    0.5 * (lo + hi)
+}
+
+#[test]
+fn strain_stiffening_sphere_inflation_matches_the_exact_incompressible_yeoh_solution() {
+    // beta = 0 reproduces the issue's neo-Hookean reference numbers (checks the quadrature)
+    let mu = 2300.0 / 3.0;
+    let du0 = yeoh_sphere_inflation_mm(mu, 0.0, 50.0);
+    assert!((du0 * 1e3 / 505.189 - 1.0).abs() < 1e-4, "{du0}");
+    // The sensor wall at 50 kPa reaches I1 - 3 ~ 0.1, so beta = 5 stiffens it by ~2x.
+    for (beta, p, steps) in [(5.0, 50.0, 5), (1.0, 30.0, 3)] {
+        let exact = yeoh_sphere_inflation_mm(mu, beta, p);
+        let neo = yeoh_sphere_inflation_mm(mu, 0.0, p);
+        let mat = Material::from_young_poisson(2300.0, 0.4999, MaterialLaw::NeoHookean)
+            .with_stiffening(beta);
+        let (ui, _) = inflate_sphere_with(mat, p, COARSE, Formulation::Mixed, steps);
+        println!(
+            "Yeoh sphere beta = {beta}, p = {p} kPa: inner {:.3} um (exact {:.3}, neo-Hookean \
+             {:.3})",
+            ui * 1e3,
+            exact * 1e3,
+            neo * 1e3
+        );
+        // the stiffening effect must exceed 3x the tolerance below for the test to
+        // discriminate (5.8 % at beta = 1, 38 % at beta = 5)
+        assert!(neo / exact - 1.0 > 3e-2, "{neo} vs {exact}");
+        // same 1 % as the neo-Hookean check (nu = 0.4999, coarse mesh)
+        assert!(
+            (ui / exact - 1.0).abs() < 1e-2,
+            "beta {beta}: {ui} vs {exact}"
+        );
+    }
 }

@@ -99,9 +99,16 @@ impl LutHeader {
                 solver: lut.solver.clone(),
             },
             shard: lut.shard,
-            curve_order: "index = (((material*n_friction + friction)*n_thickness + thickness)\
+            // the stiffening axis (outermost) is named only when it is varied, so tables
+            // without it keep the bytes they had before the axis existed
+            curve_order: if lut.grid.effects.stiffening.len() > 1 {
+                "index = ((((stiffening*n_material + material)*n_friction + friction)\
+                 *n_thickness + thickness)*n_pressure + pressure)*n_modulus + modulus"
+            } else {
+                "index = (((material*n_friction + friction)*n_thickness + thickness)\
                           *n_pressure + pressure)*n_modulus + modulus"
-                .to_string(),
+            }
+            .to_string(),
             curve_scalars: SCALARS.iter().map(|s| s.to_string()).collect(),
             columns: COLUMNS.iter().map(|s| s.to_string()).collect(),
             body_encoding: "f64 little-endian; per curve in header order: curve_scalars, then \

@@ -1,11 +1,13 @@
 //! The LUT grid: the base model parameters, the two main axes (sample modulus E2, internal
-//! pressure p_air) and the effect axes (sample thickness, friction, material law) that a
-//! diagnosis workflow varies. Every effect axis defaults to the single value of the base
-//! parameters.
+//! pressure p_air) and the effect axes (sample thickness, friction, material law, sample
+//! strain stiffening) that a diagnosis workflow varies. Every effect axis defaults to the
+//! single value of the base parameters.
 //!
 //! Curve order (the order of curves in a file, and what `--shard K/N` splits) is fixed:
-//! material (outermost), friction, thickness, pressure, modulus (innermost), i.e.
-//! `index = (((m * n_f + f) * n_t + t) * n_p + p) * n_e + e`.
+//! stiffening (outermost), material, friction, thickness, pressure, modulus (innermost), i.e.
+//! `index = ((((s * n_m + m) * n_f + f) * n_t + t) * n_p + p) * n_e + e`. The stiffening
+//! axis was added later; with its single default value 0 the order (and the file bytes,
+//! since the axis is then not written) are those of tables built before it existed.
 
 use serde::{Deserialize, Serialize};
 
@@ -21,6 +23,22 @@ pub struct EffectAxes {
     pub friction: Vec<f64>,
     /// Material law of both bodies.
     pub material: Vec<MaterialLaw>,
+    /// Sample strain stiffening, Yeoh `c2/c1` (`CurveParams::sample_stiffening`).
+    /// Absent in files written before the axis existed: then `[0.0]`, and `[0.0]` is not
+    /// written.
+    #[serde(
+        default = "neutral_stiffening_axis",
+        skip_serializing_if = "is_neutral_stiffening_axis"
+    )]
+    pub stiffening: Vec<f64>,
+}
+
+fn neutral_stiffening_axis() -> Vec<f64> {
+    vec![0.0]
+}
+
+fn is_neutral_stiffening_axis(v: &[f64]) -> bool {
+    v == [0.0]
 }
 
 impl EffectAxes {
@@ -30,6 +48,7 @@ impl EffectAxes {
             sample_thickness_mm: vec![base.sample_thickness_mm],
             friction: vec![base.friction],
             material: vec![base.material],
+            stiffening: vec![base.sample_stiffening],
         }
     }
 }
@@ -54,6 +73,7 @@ pub struct LutGrid {
 /// Position of one curve on the grid (indices into the axes).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct GridIndex {
+    pub stiffening: usize,
     pub material: usize,
     pub friction: usize,
     pub thickness: usize,
@@ -115,6 +135,7 @@ pub struct EffectSelection {
     pub sample_thickness_mm: Option<f64>,
     pub friction: Option<f64>,
     pub material: Option<MaterialLaw>,
+    pub stiffening: Option<f64>,
 }
 
 /// `n` log-spaced values from `lo` to `hi` inclusive, rounded to 4 significant digits so
@@ -202,6 +223,7 @@ impl LutGrid {
             |v| v > 0.0,
         )?;
         check_axis("friction", &self.effects.friction, |v| v >= 0.0)?;
+        check_axis("stiffening", &self.effects.stiffening, |v| v >= 0.0)?;
         let m = &self.effects.material;
         if m.is_empty() {
             return Err(LutError::InvalidGrid("axis material is empty".into()));
@@ -231,12 +253,15 @@ impl LutGrid {
             * self.effects.sample_thickness_mm.len()
             * self.effects.friction.len()
             * self.effects.material.len()
+            * self.effects.stiffening.len()
     }
 
     /// Flat curve index of a grid position (see the module docs for the order).
     pub fn flat_index(&self, g: GridIndex) -> usize {
         let e = &self.effects;
-        (((g.material * e.friction.len() + g.friction) * e.sample_thickness_mm.len() + g.thickness)
+        ((((g.stiffening * e.material.len() + g.material) * e.friction.len() + g.friction)
+            * e.sample_thickness_mm.len()
+            + g.thickness)
             * self.pressure_kpa.len()
             + g.pressure)
             * self.modulus_kpa.len()
@@ -255,8 +280,11 @@ impl LutGrid {
         i /= e.sample_thickness_mm.len();
         let friction = i % e.friction.len();
         i /= e.friction.len();
+        let material = i % e.material.len();
+        i /= e.material.len();
         GridIndex {
-            material: i,
+            stiffening: i,
+            material,
             friction,
             thickness,
             pressure,
@@ -273,6 +301,7 @@ impl LutGrid {
             sample_thickness_mm: self.effects.sample_thickness_mm[g.thickness],
             friction: self.effects.friction[g.friction],
             material: self.effects.material[g.material],
+            sample_stiffening: self.effects.stiffening[g.stiffening],
             ..self.base.clone()
         }
     }
@@ -295,14 +324,18 @@ impl LutGrid {
         if e.material.len() > 1 {
             s += &format!(" material={:?}", e.material[g.material]);
         }
+        if e.stiffening.len() > 1 {
+            s += &format!(" stiffening={}", e.stiffening[g.stiffening]);
+        }
         s
     }
 
-    /// Resolve an effect selection to axis indices (thickness, friction, material).
+    /// Resolve an effect selection to axis indices (thickness, friction, material,
+    /// stiffening).
     pub fn resolve_effects(
         &self,
         sel: &EffectSelection,
-    ) -> Result<(usize, usize, usize), LutError> {
+    ) -> Result<(usize, usize, usize, usize), LutError> {
         let e = &self.effects;
         let t = pick_value(
             "sample_thickness_mm",
@@ -328,7 +361,8 @@ impl LutGrid {
                     }
                 })?,
             };
-        Ok((t, f, m))
+        let s = pick_value("stiffening", &e.stiffening, sel.stiffening)?;
+        Ok((t, f, m, s))
     }
 }
 
@@ -387,6 +421,31 @@ mod tests {
         assert_eq!(g.grid_index(g.modulus_kpa.len()).pressure, 1);
         let last = g.grid_index(g.curve_count() - 1);
         assert_eq!((last.material, last.friction), (1, 2));
+        // the stiffening axis is outermost
+        g.effects.stiffening = vec![0.0, 1.0];
+        g.validate().unwrap();
+        let half = g.curve_count() / 2;
+        assert_eq!(g.grid_index(half - 1).stiffening, 0);
+        assert_eq!(g.grid_index(half).stiffening, 1);
+        assert_eq!(g.curve_params(half).sample_stiffening, 1.0);
+        for i in 0..g.curve_count() {
+            assert_eq!(g.flat_index(g.grid_index(i)), i);
+        }
+    }
+
+    #[test]
+    fn neutral_stiffening_axis_is_not_serialised_and_defaults_when_absent() {
+        let g = LutGrid::default_grid();
+        let json = serde_json::to_string(&g).unwrap();
+        assert!(!json.contains("stiffening"), "{json}");
+        let back: LutGrid = serde_json::from_str(&json).unwrap();
+        assert_eq!(back.effects.stiffening, vec![0.0]);
+        assert_eq!(back, g);
+        let mut h = g.clone();
+        h.effects.stiffening = vec![0.0, 2.0];
+        let json = serde_json::to_string(&h).unwrap();
+        assert!(json.contains("\"stiffening\":[0.0,2.0]"), "{json}");
+        assert_eq!(serde_json::from_str::<LutGrid>(&json).unwrap(), h);
     }
 
     #[test]
@@ -418,7 +477,7 @@ mod tests {
         let mut g = LutGrid::tiny_grid();
         assert_eq!(
             g.resolve_effects(&EffectSelection::default()).unwrap(),
-            (0, 0, 0)
+            (0, 0, 0, 0)
         );
         g.effects.friction = vec![0.0, 0.3];
         assert!(g.resolve_effects(&EffectSelection::default()).is_err());
@@ -426,7 +485,7 @@ mod tests {
             friction: Some(0.3),
             ..Default::default()
         };
-        assert_eq!(g.resolve_effects(&sel).unwrap(), (0, 1, 0));
+        assert_eq!(g.resolve_effects(&sel).unwrap(), (0, 1, 0, 0));
         let sel = EffectSelection {
             friction: Some(0.2),
             ..Default::default()

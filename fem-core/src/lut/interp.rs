@@ -109,7 +109,7 @@ impl Lut {
     /// The (E2, p_air) slice at the given effect-axis values (each must be a grid value, or
     /// `None` for a single-valued axis).
     pub fn slice(&self, sel: &EffectSelection) -> Result<LutSlice<'_>, LutError> {
-        let (t, f, m) = self.grid.resolve_effects(sel)?;
+        let (t, f, m, s) = self.grid.resolve_effects(sel)?;
         if self.grid.modulus_kpa.len() < 2 {
             return Err(LutError::InvalidGrid(
                 "interpolation needs at least two modulus values".into(),
@@ -120,6 +120,7 @@ impl Lut {
                 (0..self.grid.modulus_kpa.len())
                     .map(|e| {
                         let index = self.grid.flat_index(super::grid::GridIndex {
+                            stiffening: s,
                             material: m,
                             friction: f,
                             thickness: t,

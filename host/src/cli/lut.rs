@@ -58,6 +58,16 @@ pub struct BuildArgs {
     /// Override the grid's number of load steps per curve.
     #[arg(long)]
     pub steps: Option<usize>,
+    /// Effect axis: sample thicknesses in mm, comma-separated, increasing (e.g. 3,7).
+    #[arg(long, value_delimiter = ',')]
+    pub thickness: Option<Vec<f64>>,
+    /// Effect axis: friction coefficients, comma-separated, increasing (e.g. 0,0.3).
+    #[arg(long, value_delimiter = ',')]
+    pub friction: Option<Vec<f64>>,
+    /// Effect axis: sample strain stiffening (Yeoh c2/c1), comma-separated, increasing
+    /// (e.g. 0,2).
+    #[arg(long, value_delimiter = ',')]
+    pub stiffening: Option<Vec<f64>>,
 }
 
 #[derive(Debug, Args)]
@@ -103,6 +113,19 @@ fn build(a: BuildArgs) -> ExitCode {
     }
     if let Some(steps) = a.steps {
         grid.base.steps = steps;
+    }
+    // effect axes; the base takes each axis' first value (as in the named grids)
+    if let Some(v) = a.thickness {
+        grid.base.sample_thickness_mm = v.first().copied().unwrap_or(f64::NAN);
+        grid.effects.sample_thickness_mm = v;
+    }
+    if let Some(v) = a.friction {
+        grid.base.friction = v.first().copied().unwrap_or(f64::NAN);
+        grid.effects.friction = v;
+    }
+    if let Some(v) = a.stiffening {
+        grid.base.sample_stiffening = v.first().copied().unwrap_or(f64::NAN);
+        grid.effects.stiffening = v;
     }
     if let Err(e) = grid.validate() {
         return bad_input(e);
@@ -282,6 +305,7 @@ fn describe(path: &Path, file: &LutFile) -> String {
     ));
     line(format!("friction:      {}", axis(&g.effects.friction)));
     line(format!("material:      {:?}", g.effects.material));
+    line(format!("stiffening:    {}", axis(&g.effects.stiffening)));
     line(format!(
         "base:          {}",
         serde_json::to_string(&g.base).unwrap_or_default()
