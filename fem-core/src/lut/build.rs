@@ -15,8 +15,9 @@ use crate::curve::{Curve, CurveParams};
 /// settings, including the mesh divisions, as recorded in tables it builds.
 pub fn fem_solver_description(mesh_level: i32) -> String {
     format!(
-        "fem_core::solve_curve with {:?}",
-        crate::problem::SolverSettings::for_level(mesh_level)
+        "fem_core::solve_curve with {:?}; {}",
+        crate::problem::SolverSettings::for_level(mesh_level),
+        crate::problem::OUTPUT_DEFINITIONS
     )
 }
 
