@@ -17,7 +17,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         sample_stiffening: get(6, 0.0),
         ..Default::default()
     };
-    let curve = fem_core::solve_curve(&params)?;
+    let (curve, stop) = fem_core::solve_curve_partial(&params)?;
+    if let Some(e) = stop {
+        println!("stopped early: {e}");
+    }
     println!(
         "rest volume {:.3} mm3, inflated {:.3} mm3, inflation apex {:.4} mm",
         curve.rest_volume_mm3, curve.inflated_volume_mm3, curve.inflation_apex_mm

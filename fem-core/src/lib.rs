@@ -22,4 +22,4 @@ pub mod shape;
 
 pub use curve::{ContactPressureSample, Curve, CurveParams, CurvePoint, MaterialLaw};
 pub use error::FemError;
-pub use problem::{SolverSettings, solve_curve, solve_curve_with};
+pub use problem::{SolverSettings, solve_curve, solve_curve_partial, solve_curve_with};

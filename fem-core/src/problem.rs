@@ -37,8 +37,8 @@ pub const SHELL_SKIRT_MM: f64 = 4.0;
 
 /// How the per-step outputs are post-processed from the converged state; recorded in the
 /// tables' solver description so a table built with another definition is detected.
-pub const OUTPUT_DEFINITIONS: &str =
-    "contact radius: weighted g^(2/3) edge extrapolation over open node pairs (v2)";
+pub const OUTPUT_DEFINITIONS: &str = "contact radius: weighted g^(2/3) edge extrapolation over open node pairs (v2); tables: \
+     a curve whose stage 2 stops converging keeps its converged steps (truncated)";
 
 /// Mesh description derived from `mesh_level`.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -610,6 +610,27 @@ pub fn solve_curve_state(
     params: &CurveParams,
     settings: &SolverSettings,
 ) -> Result<(Curve, Indentation, Vec<f64>), FemError> {
+    solve_stages(params, settings, false).map(|(curve, ind, state, _)| (curve, ind, state))
+}
+
+/// Like [`solve_curve`], but when stage 2 stops converging after at least one load step
+/// (e.g. the unpressurised shell snapping through against a stiff sample: a limit point that
+/// displacement control cannot pass), the curve up to the last converged step is returned
+/// together with the reason it stops. Callers must treat such a curve as covering only
+/// `h <= points.last().h_mm`. Stage-1 failures and failures before the first load step are
+/// still errors.
+pub fn solve_curve_partial(params: &CurveParams) -> Result<(Curve, Option<FemError>), FemError> {
+    solve_stages(params, &SolverSettings::for_level(params.mesh_level), true)
+        .map(|(curve, _, _, stop)| (curve, stop))
+}
+
+type Stages = (Curve, Indentation, Vec<f64>, Option<FemError>);
+
+fn solve_stages(
+    params: &CurveParams,
+    settings: &SolverSettings,
+    allow_truncation: bool,
+) -> Result<Stages, FemError> {
     validate(params)?;
     faer::set_global_parallelism(faer::Par::Seq);
     let started = Instant::now();
@@ -646,6 +667,7 @@ pub fn solve_curve_state(
     state[..u.len()].copy_from_slice(&u);
     let apex_z0_mm = state[2 * ind.shell.inner_apex + 1];
     let mut points = vec![ind.curve_point(&state, 0.0, apex_z0_mm)];
+    let mut stop = None;
     let dh = params.max_depth_mm / params.steps as f64;
     for k in 1..=params.steps {
         let h_from = dh * (k - 1) as f64;
@@ -653,7 +675,7 @@ pub fn solve_curve_state(
         let saved = ind.model.contact.as_ref().map(|c| c.multipliers.clone());
         let committed = std::cell::RefCell::new(saved);
         let ind_cell = std::cell::RefCell::new(&mut ind);
-        continuation(
+        let stepped = continuation(
             h_from,
             h_to,
             dh,
@@ -686,8 +708,15 @@ pub fn solve_curve_state(
             },
             "stage 2 (indentation)",
             "mm of tube travel",
-        )?;
-        points.push(ind.curve_point(&state, h_to, apex_z0_mm));
+        );
+        match stepped {
+            Ok(()) => points.push(ind.curve_point(&state, h_to, apex_z0_mm)),
+            Err(e) if allow_truncation && points.len() >= 2 => {
+                stop = Some(e);
+                break;
+            }
+            Err(e) => return Err(e),
+        }
     }
     let curve = Curve {
         params: params.clone(),
@@ -697,5 +726,5 @@ pub fn solve_curve_state(
         points,
         solve_seconds: started.elapsed().as_secs_f64(),
     };
-    Ok((curve, ind, state))
+    Ok((curve, ind, state, stop))
 }

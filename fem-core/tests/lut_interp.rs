@@ -285,3 +285,60 @@ fn a_failed_neighbour_curve_is_reported_by_name() {
         )
         .unwrap();
 }
+
+#[test]
+fn truncated_curves_are_recorded_and_limit_the_queryable_range() {
+    // The stiffest curve at p_air = 0 stops at h = 1.1 mm (as the unpressurised shell on a
+    // stiff sample does in fem-core): stored as truncated, not failed.
+    let base = CurveParams {
+        steps: 40,
+        ..CurveParams::default()
+    };
+    let g = LutGrid::with_axes(
+        "truncation-test",
+        base,
+        vec![100.0, 316.0, 1000.0],
+        vec![0.0, 6.0],
+    );
+    let short = |p: &CurveParams| {
+        let mut c = standin_solver(p)?;
+        if p.sample_modulus_kpa == 1000.0 && p.pressure_kpa == 0.0 {
+            c.points.truncate(23); // h = 0 .. 1.1 mm
+        }
+        Ok::<_, String>(c)
+    };
+    let lut = build_lut(&g, None, &short, STANDIN, &|_| {}).unwrap();
+    let (bytes, _) = fem_core::lut::write_lut_bytes(&lut).unwrap();
+    let file = fem_core::lut::read_lut_bytes(&bytes, "mem").unwrap();
+    let entries: Vec<_> = file
+        .header
+        .curves
+        .iter()
+        .filter(|c| c.truncated_at_h_mm.is_some())
+        .collect();
+    assert_eq!(entries.len(), 1);
+    assert_eq!(entries[0].index, 2);
+    assert!((entries[0].truncated_at_h_mm.unwrap() - 1.1).abs() < 1e-12);
+    assert_eq!(file.lut.truncated().count(), 1);
+    assert_eq!(file.lut.failures().count(), 0);
+    // between E2 = 316 and 1000 at p_air = 0 the range ends at the short curve's last u_s
+    let last_u = *file.lut.curve(2).unwrap().u_s_mm.last().unwrap();
+    let slice = file.lut.slice(&EffectSelection::default()).unwrap();
+    let (_, hi) = slice.u_s_range_mm(500.0, 0.0).unwrap();
+    assert!((hi - last_u).abs() < 1e-12, "{hi} vs {last_u}");
+    let q = |u: f64| LutQuery {
+        modulus_kpa: 500.0,
+        pressure_kpa: 0.0,
+        u_s_mm: u,
+    };
+    assert!(slice.sample(&q(0.9 * last_u), OutOfRange::Error).is_ok());
+    assert!(matches!(
+        slice.sample(&q(1.01 * last_u), OutOfRange::Error),
+        Err(LutError::OutOfRange { .. })
+    ));
+    // the softer interval is not affected by the short curve: its range is the (full)
+    // softest curve's
+    let (_, hi_soft) = slice.u_s_range_mm(150.0, 0.0).unwrap();
+    let soft_last = *file.lut.curve(0).unwrap().u_s_mm.last().unwrap();
+    assert!((hi_soft - soft_last).abs() < 1e-12);
+}

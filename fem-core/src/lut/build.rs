@@ -21,6 +21,22 @@ pub fn fem_solver_description(mesh_level: i32) -> String {
     )
 }
 
+/// The curve solver used for tables: [`crate::solve_curve_partial`], i.e. a curve whose
+/// stage 2 stops converging (snap-through of the unpressurised shell on a stiff sample) is
+/// kept up to its last converged step; the table records it as truncated
+/// (`CurveEntry::truncated_at_h_mm`) and interpolation covers only its u_s range. The
+/// reason it stopped is passed to `on_stop` with the curve's parameters.
+pub fn solve_curve_for_table(
+    params: &CurveParams,
+    on_stop: &(dyn Fn(&CurveParams, &crate::FemError) + Sync),
+) -> Result<Curve, crate::FemError> {
+    let (curve, stop) = crate::solve_curve_partial(params)?;
+    if let Some(e) = &stop {
+        on_stop(params, e);
+    }
+    Ok(curve)
+}
+
 /// Progress report for one finished curve (for printing; never stored in the table).
 #[derive(Debug, Clone)]
 pub struct CurveReport {

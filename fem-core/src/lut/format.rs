@@ -53,6 +53,11 @@ pub struct CurveEntry {
     pub steps: usize,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub failure: Option<String>,
+    /// Set when the curve stops before the grid's `max_depth_mm` (the solver stopped
+    /// converging there, e.g. a snap-through; see `fem_core::solve_curve_partial`): the last
+    /// stored tube travel. Queries beyond the curve's last u_s are out of range.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub truncated_at_h_mm: Option<f64>,
 }
 
 /// The JSON header of a LUT file.
@@ -122,6 +127,7 @@ impl LutHeader {
                     index: c.index,
                     steps: c.len(),
                     failure: c.failure.clone(),
+                    truncated_at_h_mm: lut.truncated_at_h_mm(c),
                 })
                 .collect(),
         }

@@ -138,6 +138,21 @@ impl Lut {
         self.curves.iter().filter(|c| c.failure.is_some())
     }
 
+    /// The last tube travel of a curve that stops short of the grid's `max_depth_mm`
+    /// (`None` for complete and failed curves).
+    pub fn truncated_at_h_mm(&self, c: &LutCurve) -> Option<f64> {
+        let last = *c.h_mm.last()?;
+        let full = self.grid.base.max_depth_mm;
+        (c.failure.is_none() && last < full * (1.0 - 1e-9)).then_some(last)
+    }
+
+    /// Curves that stop short of the grid's `max_depth_mm`.
+    pub fn truncated(&self) -> impl Iterator<Item = &LutCurve> {
+        self.curves
+            .iter()
+            .filter(|c| self.truncated_at_h_mm(c).is_some())
+    }
+
     /// Check the structural invariants: valid grid, curves sorted, each index of the grid
     /// (or shard) exactly once, equal-length columns.
     pub fn validate(&self) -> Result<(), String> {

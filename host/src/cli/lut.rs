@@ -9,7 +9,7 @@
 use clap::{Args, Subcommand, ValueEnum};
 use fem_core::lut::{
     CurveReport, LutFile, LutGrid, Shard, build_lut, fem_solver_description, merge_shards,
-    read_lut, write_lut,
+    read_lut, solve_curve_for_table, write_lut,
 };
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -174,7 +174,14 @@ fn build(a: BuildArgs) -> ExitCode {
     };
     let start = Instant::now();
     let description = fem_solver_description(grid.base.mesh_level);
-    let lut = match build_lut(&grid, shard, &fem_core::solve_curve, &description, &report) {
+    let on_stop = |p: &fem_core::CurveParams, e: &fem_core::FemError| {
+        eprintln!(
+            "note: E2={} kPa p_air={} kPa stops early (kept up to the last converged step): {e}",
+            p.sample_modulus_kpa, p.pressure_kpa
+        );
+    };
+    let solver = |p: &fem_core::CurveParams| solve_curve_for_table(p, &on_stop);
+    let lut = match build_lut(&grid, shard, &solver, &description, &report) {
         Ok(l) => l,
         Err(e) => return bad_input(e),
     };
@@ -188,6 +195,14 @@ fn build(a: BuildArgs) -> ExitCode {
     };
     let size = std::fs::metadata(&out).map(|m| m.len()).unwrap_or(0);
     let failed = lut.failures().count();
+    let truncated = lut.truncated().count();
+    if truncated > 0 {
+        eprintln!(
+            "note: {truncated} curve(s) end before h = {} mm (recorded as truncated; see \
+             `tactile lut info`)",
+            grid.base.max_depth_mm
+        );
+    }
     eprintln!(
         "wrote {} ({size} bytes, sha256:{hash}): {} curve(s) in {wall:.1} s wall",
         out.display(),
@@ -328,6 +343,22 @@ fn describe(path: &Path, file: &LutFile) -> String {
         .flat_map(|c| c.a_mm.iter().copied())
         .fold(f64::NAN, f64::max);
     line(format!("max u_s:       {u_max} mm, max a: {a_max} mm"));
+    let truncated: Vec<_> = lut.truncated().collect();
+    line(format!(
+        "truncated curves: {} (they end before h = {} mm; queries beyond their last u_s are \
+         out of range)",
+        truncated.len(),
+        g.base.max_depth_mm
+    ));
+    for c in truncated {
+        line(format!(
+            "  curve {} ({}): ends at h = {} mm, u_s = {} mm",
+            c.index,
+            g.describe(c.index),
+            c.h_mm.last().copied().unwrap_or(f64::NAN),
+            c.u_s_mm.last().copied().unwrap_or(f64::NAN)
+        ));
+    }
     let failures: Vec<_> = lut.failures().collect();
     line(format!("failed curves: {}", failures.len()));
     for c in failures {
