@@ -29,6 +29,10 @@ enum Command {
     Fit(cli::fit::FitArgs),
     /// The whole measurement against the emulated bench: calibrate, measure, fit, record.
     Demo(cli::demo::DemoArgs),
+    /// Calibrate the bench: manometer zero, load tare, proximity sweep, camera px/mm.
+    Calibrate(cli::calibrate::CalibrateArgs),
+    /// One experiment on the bench: indent, pair frames with samples, fit, record.
+    Measure(cli::measure::MeasureArgs),
 }
 
 fn main() -> ExitCode {
@@ -41,5 +45,7 @@ fn main() -> ExitCode {
         Command::Fem(args) => cli::fem::run(args),
         Command::Fit(args) => cli::fit::run(args),
         Command::Demo(args) => cli::demo::run(args),
+        Command::Calibrate(args) => cli::calibrate::run(args),
+        Command::Measure(args) => cli::measure::run(args),
     }
 }

@@ -25,34 +25,52 @@ fn options(name: &str, modulus: f64, repeats: u32) -> DemoOptions {
         lut: None,
         repeats,
         progress: false,
+        u_s_equals_h: false,
     }
 }
 
-/// The acceptance criterion: within 2 % with the interval covering the truth.
-/// KNOWN TO FAIL at the time of writing: the demo reads 3-6 % high at 60-200 kPa with an
-/// interval that misses the truth (README, "Status"); suspected cause: the proximity
-/// calibration takes u_s = h on the rigid sample.
+/// The acceptance criterion: within 2 % with the 95 % interval covering the truth,
+/// at off-grid moduli between 20 and 400 kPa (the fit table's nodes are 6 per decade:
+/// ..., 21.5, 31.6, 46.4, 68.1, 100, 146.8, 215.4, 316.2, 464.2, ...), each measured at a
+/// pressure where a responds to E2 (6 kPa for soft, 15 kPa for the stiff one). The truth
+/// is a direct fem-core solve at the true modulus (hil-sim's `solve` mechanics), so the
+/// table's interpolation error is part of what is measured.
 #[test]
-#[ignore = "real-time hil-sim run (~25 s each); release"]
+#[ignore = "real-time hil-sim runs (~23 s each); release"]
 fn demo_recovers_the_modulus_within_2_percent() {
-    for modulus in [60.0, 200.0] {
-        let opts = options(&format!("e{modulus}"), modulus, 5);
-        let report = run_demo_with(demo_scenario(modulus, 6.0, 3), &opts).unwrap();
+    let mut failures = Vec::new();
+    for (modulus, pressure) in [
+        (25.0, 6.0),
+        (60.0, 6.0),
+        (120.0, 6.0),
+        (200.0, 6.0),
+        (350.0, 15.0),
+    ] {
+        let mut opts = options(&format!("e{modulus}"), modulus, 5);
+        opts.pressure_kpa = pressure;
+        let report = run_demo_with(demo_scenario(modulus, pressure, 3), &opts).unwrap();
+        let error = report.modulus_kpa / modulus - 1.0;
         eprintln!(
-            "E2 {modulus}: fit {:.1} kPa [{:.1}, {:.1}], rms {:.4} mm, {} points, {:.1} s",
+            "E2 {modulus} kPa at {pressure} kPa: fit {:.2} kPa ({:+.2} %) [{:.2}, {:.2}], rms {:.4} mm, {} points, {:.1} s",
             report.modulus_kpa,
+            100.0 * error,
             report.ci95_kpa[0],
             report.ci95_kpa[1],
             report.rms_residual_mm,
             report.points,
             report.elapsed_s
         );
-        assert!(
-            (report.modulus_kpa / modulus - 1.0).abs() < 0.02,
-            "{report:?}"
-        );
-        assert!(report.ci95_kpa[0] <= modulus && modulus <= report.ci95_kpa[1]);
+        if error.abs() >= 0.02 {
+            failures.push(format!("E2 {modulus}: error {:+.2} %", 100.0 * error));
+        }
+        if !(report.ci95_kpa[0] <= modulus && modulus <= report.ci95_kpa[1]) {
+            failures.push(format!(
+                "E2 {modulus}: interval [{:.2}, {:.2}] misses the truth",
+                report.ci95_kpa[0], report.ci95_kpa[1]
+            ));
+        }
     }
+    assert!(failures.is_empty(), "{failures:?}");
 }
 
 #[test]

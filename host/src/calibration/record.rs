@@ -28,6 +28,68 @@ pub struct CalibrationRecord {
     pub manometer_zero_kpa: f64,
     /// Load-cell reading after the device's tare (should be ~0).
     pub load_tare_residual_n: f64,
+    /// The rigid-sample sweeps behind `proximity` (contact, both fits, their difference).
+    #[serde(default)]
+    pub proximity_sweeps: Vec<super::SweepFit>,
+    /// Standard error of `px_per_mm`.
+    #[serde(default)]
+    pub px_per_mm_sigma: Option<f64>,
+    /// Edge offset of the camera scale (r_px = px_per_mm r_mm + offset), when fitted.
+    #[serde(default)]
+    pub px_offset_px: Option<f64>,
+}
+
+impl CalibrationRecord {
+    /// An empty record for `device_serial` created now.
+    pub fn new(device_serial: &str, firmware_version: &str) -> Self {
+        Self {
+            created_unix_s: crate::records::unix_now_s(),
+            device_serial: device_serial.to_string(),
+            firmware_version: firmware_version.to_string(),
+            proximity: Vec::new(),
+            proximity_u_s_equals_h: Vec::new(),
+            u_s_vs_h_max_difference_mm: None,
+            rigid_u_s_source: String::new(),
+            px_per_mm: None,
+            manometer_zero_kpa: 0.0,
+            load_tare_residual_n: 0.0,
+            proximity_sweeps: Vec::new(),
+            px_per_mm_sigma: None,
+            px_offset_px: None,
+        }
+    }
+
+    /// Stores a sweep's result, replacing any earlier one at the same pressure.
+    pub fn set_proximity(&mut self, fit: &super::SweepFit) {
+        let p = fit.calibration.p_air_kpa;
+        let same = |q: f64| (q - p).abs() < 1e-6;
+        self.proximity.retain(|c| !same(c.p_air_kpa));
+        self.proximity_u_s_equals_h.retain(|c| !same(c.p_air_kpa));
+        self.proximity_sweeps
+            .retain(|s| !same(s.calibration.p_air_kpa));
+        self.proximity.push(fit.calibration);
+        self.proximity_u_s_equals_h
+            .push(fit.calibration_u_s_equals_h);
+        self.proximity_sweeps.push(fit.clone());
+        self.u_s_vs_h_max_difference_mm = self
+            .proximity_sweeps
+            .iter()
+            .map(|s| s.u_s_difference_max_mm)
+            .reduce(f64::max);
+        self.rigid_u_s_source = fit.rigid_u_s_source.clone();
+    }
+
+    /// The proximity calibration at `p_air_kpa` (within 0.5 kPa).
+    pub fn proximity_at(&self, p_air_kpa: f64) -> Option<&ProximityCalibration> {
+        self.proximity
+            .iter()
+            .filter(|c| (c.p_air_kpa - p_air_kpa).abs() <= 0.5)
+            .min_by(|a, b| {
+                (a.p_air_kpa - p_air_kpa)
+                    .abs()
+                    .total_cmp(&(b.p_air_kpa - p_air_kpa).abs())
+            })
+    }
 }
 
 #[derive(Debug, thiserror::Error)]

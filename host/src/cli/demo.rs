@@ -33,6 +33,10 @@ pub struct DemoArgs {
     /// Indentations.
     #[arg(long, default_value_t = 5)]
     pub repeats: u32,
+    /// Calibrate the proximity sensor with the paper's u_s = h on the rigid sample instead
+    /// of fem-core's rigid-sample u_s(h).
+    #[arg(long)]
+    pub u_s_equals_h: bool,
     /// Print one JSON object.
     #[arg(long)]
     pub json: bool,
@@ -48,6 +52,7 @@ pub fn run(args: DemoArgs) -> ExitCode {
         lut: args.lut,
         repeats: args.repeats,
         progress: !args.json,
+        u_s_equals_h: args.u_s_equals_h,
     };
     match run_demo(&options) {
         Ok(report) => {

@@ -1,9 +1,11 @@
 //! Subcommand implementations; `main.rs` only dispatches.
 
+pub mod calibrate;
 pub mod demo;
 pub mod devices;
 pub mod fem;
 pub mod fit;
 pub mod flash;
 pub mod lut;
+pub mod measure;
 pub mod radius;

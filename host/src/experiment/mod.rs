@@ -3,9 +3,15 @@
 //! the frame's time, split load and unload, repeat.
 //!
 //! - [`pairing`]: frames x samples -> a–u_s points;
-//! - [`indentation`]: the run itself against a [`crate::link::Link`] and a [`RadiusSource`].
+//! - [`indentation`]: the run itself against a [`crate::link::Link`] and a [`RadiusSource`];
+//! - [`camera_radius`]: a [`RadiusSource`] over any camera [`crate::camera::FrameSource`];
+//! - [`analysis`]: curve.csv, the fit and the plots of a finished run;
+//! - [`measurement`]: a whole `tactile measure` run with stored calibrations.
 
+pub mod analysis;
+pub mod camera_radius;
 pub mod indentation;
+pub mod measurement;
 pub mod pairing;
 #[cfg(feature = "sim")]
 pub mod simulated;

@@ -17,12 +17,15 @@ use hil_sim::camera::{CameraRenderer, FrameScene, PixelFormat};
 use hil_sim::device::SimFrame;
 use hil_sim::rng::SimRng;
 use hil_sim::scenario::Scenario;
-use protocol::{ChannelSet, Request};
+use protocol::Request;
 
 use super::RadiusSource;
 use super::pairing::RadiusSample;
-use crate::calibration::ProximityCalibration;
-use crate::camera::{GrayImage, host_clock};
+use crate::calibration::{
+    CalibrationError, ProximityCalibration, RIGID_MODULUS_KPA, RigidSampleCurve, SweepFit,
+    SweepPlan, fit_sweep, manometer_zero_kpa, proximity_sweep,
+};
+use crate::camera::GrayImage;
 use crate::link::{ClockMap, Link, LinkConfig, LinkError, SerialTransport};
 use crate::vision::contact_radius::{ContactRadiusConfig, ContactRadiusEstimator};
 use crate::vision::px_per_mm::PxPerMmCalibration;
@@ -268,118 +271,49 @@ pub fn px_per_mm_from_reference_disc(
     PxPerMmCalibration::from_measurements(&samples).map_err(|e| SimRunError::Camera(e.to_string()))
 }
 
-/// Proximity calibration on a rigid sample at `pressure_kpa`: the stage moves slowly from
-/// `start_mm` to `end_mm`; contact is where the load first exceeds `contact_load_n`;
-/// beyond it u_s = h (stage travel past contact). Returns the parabola and the manometer
-/// zero (vented reading before pressurising).
+/// Proximity calibration on a rigid sample at `pressure_kpa` (see
+/// [`crate::calibration::procedures`]): manometer zero with the vent open, the sweep from
+/// `start_mm` to `end_mm`, and the parabola fitted against `rigid`'s u_s(h) (and, for
+/// comparison, against u_s = h). Returns the sweep fit and the manometer zero.
 pub fn rigid_calibration(
     link: &mut Link,
     pressure_kpa: f64,
     start_mm: f64,
     end_mm: f64,
-) -> Result<(ProximityCalibration, f64), SimRunError> {
-    let units = *link.units();
-    link.start_stream(1000, ChannelSet::ALL)?;
-    link.request(Request::Vent { open: true })?;
-    link.pump(Duration::from_millis(300))?;
-    let zero: Vec<f64> = link
-        .drain_samples()
-        .iter()
-        .filter_map(|s| s.sample.manometer_counts)
-        .map(|c| units.manometer_kpa(c))
-        .collect();
-    let manometer_zero = zero.iter().sum::<f64>() / zero.len().max(1) as f64;
-    link.request(Request::Vent { open: false })?;
-    link.request(Request::SetPressure {
-        setpoint_kpa: (pressure_kpa + manometer_zero) as f32,
-    })?;
-    let speed = 2.0;
-    let go = |link: &mut Link,
-              target_mm: f64,
-              speed_mm_per_s: f64|
-     -> Result<Vec<protocol::Sample>, SimRunError> {
-        link.request(Request::MoveStage {
-            target_steps: units.stage_steps(target_mm),
-            speed_steps_per_s: (speed_mm_per_s * units.stage_steps_per_mm()) as u32,
-            accel_steps_per_s2: (50.0 * units.stage_steps_per_mm()) as u32,
-        })?;
-        let mut got = Vec::new();
-        let deadline = host_clock::now_us() + 30_000_000;
-        loop {
-            link.pump(Duration::from_millis(50))?;
-            got.extend(link.drain_samples().into_iter().map(|s| s.sample));
-            if let Some(s) = got.last()
-                && s.stage_steps == Some(units.stage_steps(target_mm))
-                && !s.status.contains(protocol::StatusFlags::STAGE_MOVING)
-            {
-                return Ok(got);
-            }
-            if host_clock::now_us() > deadline {
-                return Err(SimRunError::Calibration(format!(
-                    "stage did not reach {target_mm} mm"
-                )));
-            }
-        }
+    rigid: Option<&RigidSampleCurve>,
+) -> Result<(SweepFit, f64), SimRunError> {
+    let cal = |e: CalibrationError| SimRunError::Calibration(e.to_string());
+    let manometer_zero = manometer_zero_kpa(link, Duration::from_millis(300)).map_err(cal)?;
+    let plan = SweepPlan {
+        pressure_kpa,
+        start_mm,
+        end_mm,
+        speed_mm_per_s: 0.5,
+        contact_load_n: 0.005,
     };
-    go(link, start_mm, speed)?;
-    link.pump(Duration::from_millis(800))?;
-    link.drain_samples();
-    link.request(Request::TareLoad)?;
-    link.pump(Duration::from_millis(200))?;
-    link.drain_samples();
-    let sweep = go(link, end_mm, 0.5)?;
-    go(link, start_mm, speed)?;
-    link.stop_stream()?;
-    link.request(Request::PressureOff)?;
-    // Contact: the load first exceeding 5 mN brackets it from above (the pressurised shell
-    // is compliant, so that is 10-30 µm late); the contact position is then refined as the
-    // hinge of U(h) = C for h < c and the parabola in (h - c) beyond, minimising the
-    // residual over c in 1 µm steps up to 0.15 mm before the load-detected point.
-    let load_contact_steps = sweep
-        .iter()
-        .find(|s| s.load_counts.is_some_and(|c| units.load_n(c) > 0.005))
-        .and_then(|s| s.stage_steps)
-        .ok_or_else(|| {
-            SimRunError::Calibration("no contact with the rigid sample in the sweep".into())
-        })?;
-    let raw: Vec<(f64, f64)> = sweep
-        .iter()
-        .filter_map(|s| {
-            Some((
-                units.stage_mm(s.stage_steps?),
-                units.proximity_v(s.proximity_counts?),
-            ))
-        })
-        .collect();
-    let load_contact_mm = units.stage_mm(load_contact_steps);
-    let mut best: Option<(f64, ProximityCalibration)> = None;
-    for k in 0..=150 {
-        let c = load_contact_mm - 0.001 * f64::from(k);
-        let pairs: Vec<(f64, f64)> = raw
-            .iter()
-            .filter(|(h, _)| *h > c - 0.2)
-            .map(|&(h, v)| ((h - c).max(0.0), v))
-            .collect();
-        if let Ok(cal) = ProximityCalibration::fit(pressure_kpa, &pairs)
-            && best
-                .as_ref()
-                .is_none_or(|(_, b)| cal.residual_rms_v < b.residual_rms_v)
-        {
-            best = Some((c, cal));
-        }
-    }
-    let (contact_mm, _) =
-        best.ok_or_else(|| SimRunError::Calibration("no parabola fits the sweep".into()))?;
-    tracing::info!(load_contact_mm, contact_mm, "rigid-sample contact");
-    let pairs: Vec<(f64, f64)> = raw
-        .iter()
-        .map(|&(h, v)| (h - contact_mm, v))
-        .filter(|(h, _)| *h > 0.0)
-        .collect();
-    let cal = ProximityCalibration::fit(pressure_kpa, &pairs)
-        .map_err(|e| SimRunError::Calibration(e.to_string()))?;
-    Ok((cal, manometer_zero))
+    let data = proximity_sweep(
+        link,
+        &plan,
+        manometer_zero,
+        &indicatif::ProgressBar::hidden(),
+    )
+    .map_err(cal)?;
+    let fit = fit_sweep(&data, plan.contact_load_n, rigid).map_err(cal)?;
+    tracing::info!(
+        load_contact_mm = fit.load_contact_mm,
+        contact_mm = fit.contact_mm,
+        u_s_difference_max_mm = fit.u_s_difference_max_mm,
+        "rigid-sample contact"
+    );
+    Ok((fit, manometer_zero))
 }
+
+/// Mesh level, steps and depth of the demo's simulated mechanics, its rigid-sample
+/// correction and its fit table (`host/tests/data/fit_fixture.lut`): all three are
+/// fem-core solves with these settings, so the table and the truth are the same model.
+pub const DEMO_MESH_LEVEL: i32 = -2;
+pub const DEMO_STEPS: usize = 40;
+pub const DEMO_MAX_DEPTH_MM: f64 = 1.9;
 
 /// Options of [`run_demo`].
 #[derive(Debug, Clone, Default)]
@@ -392,6 +326,9 @@ pub struct DemoOptions {
     pub lut: Option<std::path::PathBuf>,
     pub repeats: u32,
     pub progress: bool,
+    /// Calibrate the proximity sensor with the paper's u_s = h instead of fem-core's
+    /// rigid-sample u_s(h) (to measure what the correction changes).
+    pub u_s_equals_h: bool,
 }
 
 /// What the demo printed (and `--json` emits).
@@ -448,7 +385,8 @@ pub fn fixture_lut_path() -> std::path::PathBuf {
 }
 
 /// The built-in scenario: the paper's gelatin (45 x 7 mm), mechanics solved by fem-core
-/// at start-up with the fixture table's settings (mesh level -2, 10 steps to 1.9 mm).
+/// at start-up with the fixture table's settings ([`DEMO_MESH_LEVEL`], [`DEMO_STEPS`] to
+/// [`DEMO_MAX_DEPTH_MM`]).
 pub fn demo_scenario(modulus_kpa: f64, pressure_kpa: f64, seed: u64) -> Scenario {
     let mut s = Scenario {
         name: "demo-gelatin".into(),
@@ -459,26 +397,40 @@ pub fn demo_scenario(modulus_kpa: f64, pressure_kpa: f64, seed: u64) -> Scenario
     s.mechanics = hil_sim::scenario::MechanicsSource::Solve {
         pressures_kpa: vec![pressure_kpa],
         modulus_factors: vec![1.0],
-        mesh_level: -2,
-        steps: 10,
-        max_depth_mm: 1.9,
+        mesh_level: DEMO_MESH_LEVEL,
+        steps: DEMO_STEPS,
+        max_depth_mm: DEMO_MAX_DEPTH_MM,
     };
     s
 }
 
+/// The rigid-sample bench of `scenario`: the same bench with a sample 50 000 times stiffer
+/// than the shell, solved by fem-core like the measurement's mechanics (no faults).
+pub fn rigid_scenario(scenario: &Scenario, pressure_kpa: f64) -> Scenario {
+    let mut rigid = scenario.clone();
+    rigid.name = format!("{}-rigid-calibration", scenario.name);
+    rigid.sample.modulus_kpa = RIGID_MODULUS_KPA;
+    rigid.mechanics = hil_sim::scenario::MechanicsSource::Solve {
+        pressures_kpa: vec![pressure_kpa],
+        modulus_factors: vec![1.0],
+        mesh_level: DEMO_MESH_LEVEL,
+        steps: DEMO_STEPS,
+        max_depth_mm: DEMO_MAX_DEPTH_MM,
+    };
+    rigid.faults = Default::default();
+    rigid
+}
+
 /// The whole demo with an explicit scenario (tests use this to inject faults).
 pub fn run_demo_with(scenario: Scenario, options: &DemoOptions) -> Result<DemoReport, DemoError> {
-    use crate::curve_csv::{CurveCsv, CurveRow, write_curve_csv};
-    use crate::fit::{FitOptions, FitPoint, LutModel, fit_modulus};
+    use crate::fit::LutModel;
     use crate::records::{RecordDir, unix_now_s, utc_stamp};
     let started = std::time::Instant::now();
-    let mut notes = vec![
-        "proximity calibration takes u_s = h beyond the load-detected contact on the rigid sample; fem-core's rigid-contact u_s(h) correction is not applied (not implemented)".to_string(),
-    ];
+    let mut notes = Vec::new();
     let lut_path = options.lut.clone().unwrap_or_else(fixture_lut_path);
     if options.lut.is_none() {
         notes.push(format!(
-            "fit table: {} (mesh level -2 fixture table, matching the mesh level -2 curves hil-sim simulates; the shipped production table fem-core/data/default.lut is not used by the demo yet)",
+            "fit table: {} (fem-core at mesh level {DEMO_MESH_LEVEL}, {DEMO_STEPS} steps to {DEMO_MAX_DEPTH_MM} mm, the same solver settings as hil-sim's simulated sample and rigid calibration sample; the shipped production table fem-core/data/default.lut (mesh level 0) is not used by the demo)",
             lut_path.display()
         ));
     }
@@ -500,31 +452,44 @@ pub fn run_demo_with(scenario: Scenario, options: &DemoOptions) -> Result<DemoRe
 
     // 1. camera scale
     let px = px_per_mm_from_reference_disc(&scenario, &[1.2, 2.0, 2.8, 3.4])?;
-    // 2. proximity parabola on a rigid sample (no faults during calibration)
-    let mut rigid = scenario.clone();
-    rigid.name = format!("{}-rigid-calibration", scenario.name);
-    rigid.mechanics = hil_sim::scenario::MechanicsSource::Rigid {};
-    rigid.sample.modulus_kpa = 3.0e6;
-    rigid.faults = Default::default();
-    let (proximity, manometer_zero) = {
-        let (bench, mut link) = start_and_connect(rigid)?;
-        let r = rigid_calibration(&mut link, pressure, surface - 0.3, surface + 1.6)?;
+    // 2. proximity parabola on a rigid sample (no faults during calibration), against
+    // fem-core's rigid-sample u_s(h) solved with the simulation's own settings
+    let rigid_curve = if options.u_s_equals_h {
+        None
+    } else {
+        Some(
+            RigidSampleCurve::solve(pressure, DEMO_MESH_LEVEL, DEMO_STEPS, DEMO_MAX_DEPTH_MM)
+                .map_err(|e| SimRunError::Calibration(e.to_string()))?,
+        )
+    };
+    let (sweep, manometer_zero) = {
+        let (bench, mut link) = start_and_connect(rigid_scenario(&scenario, pressure))?;
+        let r = rigid_calibration(
+            &mut link,
+            pressure,
+            surface - 0.3,
+            surface + 1.6,
+            rigid_curve.as_ref(),
+        )?;
         drop(link);
         bench.stop();
         r
     };
-    let calibration = crate::calibration::CalibrationRecord {
-        created_unix_s: unix_now_s(),
-        device_serial: String::new(),
-        firmware_version: String::new(),
-        proximity: vec![proximity],
-        proximity_u_s_equals_h: vec![proximity],
-        u_s_vs_h_max_difference_mm: None,
-        rigid_u_s_source: "u_s = h (paper's assumption)".into(),
-        px_per_mm: Some(px.px_per_mm),
-        manometer_zero_kpa: manometer_zero,
-        load_tare_residual_n: 0.0,
-    };
+    let proximity = sweep.calibration;
+    notes.push(match &rigid_curve {
+        Some(_) => format!(
+            "proximity calibration against fem-core's rigid-sample u_s(h): u_s differs from the paper's u_s = h by up to {:.4} mm ({:+.2} % at the deepest point)",
+            sweep.u_s_difference_max_mm,
+            100.0 * sweep.u_s_difference_at_max_relative
+        ),
+        None => "proximity calibration with the paper's u_s = h (--u-s-equals-h)".into(),
+    });
+    let mut calibration = crate::calibration::CalibrationRecord::new("", "");
+    calibration.set_proximity(&sweep);
+    calibration.px_per_mm = Some(px.px_per_mm);
+    calibration.px_per_mm_sigma = Some(px.px_per_mm_sigma);
+    calibration.px_offset_px = px.offset_px;
+    calibration.manometer_zero_kpa = manometer_zero;
     record.write_json("calibration.json", &calibration)?;
 
     // 3. measurement
@@ -588,62 +553,25 @@ pub fn run_demo_with(scenario: Scenario, options: &DemoOptions) -> Result<DemoRe
     drop(link);
     drop(source);
     let _ = bench.stop();
-    // 4. curve and fit
-    let rows: Vec<CurveRow> = result
-        .points
-        .iter()
-        .map(|(t, p)| CurveRow {
-            u_s_mm: p.u_s_mm,
-            a_mm: p.a_mm,
-            load_n: p.load_n,
-            p_air_kpa: Some(p.p_air_kpa),
-            t_s: Some(p.t_s),
-            phase: Some(p.phase),
-            test: Some(*t),
-            h_mm: None,
-            volume_mm3: None,
-        })
-        .collect();
-    write_curve_csv(
-        &record.path("curve.csv"),
-        &CurveCsv {
-            metadata: vec![("p_air_kpa".into(), format!("{pressure}"))],
-            rows,
-        },
-    )?;
-    // loading points in contact, at the nominal pressure (the manometer trace is in samples.csv)
-    let points: Vec<FitPoint> = result
-        .points
-        .iter()
-        // Both phases: the model is elastic (no hysteresis), and at equal loading and
-        // unloading speeds a camera-to-stream timing lag shifts the two phases in opposite
-        // directions, so it cancels to first order (loading alone is biased by it).
-        .filter(|(_, p)| p.a_mm > 0.0 && p.u_s_mm > 0.0)
-        .map(|(t, p)| FitPoint {
-            u_s_mm: p.u_s_mm,
-            a_mm: p.a_mm,
-            p_air_kpa: pressure,
-            test: *t,
-            load_n: p.load_n,
-        })
-        .collect();
+    // 4. curve, fit, plots
     let model = LutModel::new(&lut_file.lut).map_err(|e| DemoError::Lut {
         path: lut_path.display().to_string(),
         reason: e.to_string(),
     })?;
-    let fit = fit_modulus(&model, &points, FitOptions::default())?;
-    record.write_json("fit.json", &fit)?;
+    let (fit, points, plot_problem) =
+        super::analysis::write_curve_and_fit(&record, &result, pressure, &model).map_err(|e| {
+            match e {
+                super::analysis::AnalysisError::Record(e) => DemoError::Record(e),
+                super::analysis::AnalysisError::Curve(e) => DemoError::Curve(e),
+                super::analysis::AnalysisError::Fit(e) => DemoError::Fit(e),
+            }
+        })?;
     meta["status"] = serde_json::json!("complete");
     meta["link"] = serde_json::to_value(stats).unwrap_or_default();
-    meta["clock"] = serde_json::to_value(None::<()>).unwrap_or_default();
     record.write_json("meta.json", &meta)?;
-    if let Err(e) = crate::plots::write_fit_plots(&record.dir, &model, &points, &fit) {
+    if let Some(e) = plot_problem {
         notes.push(format!("plots could not be written: {e}"));
     }
-    notes.push(
-        "plots: SVG only (a_us.svg, residuals.svg); PNG and the pressure trace are not implemented"
-            .into(),
-    );
     Ok(DemoReport {
         modulus_kpa: fit.modulus_kpa,
         ci95_kpa: fit.ci95_kpa,

@@ -147,19 +147,179 @@ pub fn t975(dof: f64) -> f64 {
         + (3.0 * z.powi(7) + 19.0 * z.powi(5) + 17.0 * z.powi(3) - 15.0 * z) / (384.0 * v.powi(3))
 }
 
+/// One point's a(ln E2) on one interval of the table's modulus axis.
+///
+/// The table interpolates in ln E2 with PCHIP (fem-core `lut::interp`), then linearly in
+/// p_air: on each interval [x_k, x_k+1] a point's a(x) is one cubic Hermite polynomial
+/// fixed by the values and slopes at the two nodes (for several pressure nodes, a weighted
+/// sum of such cubics, again one). The table's own value and d a / d ln E2 at the nodes
+/// (one query per node, shared by the two intervals meeting there) give that cubic, after
+/// which every evaluation costs a few multiplications instead of a table query. A node
+/// the table cannot answer there (its curve does not reach the point's u_s) falls back to
+/// two queries inside the interval (value and slope at x_1, x_2: Hermite again).
+#[derive(Debug, Clone, Copy)]
+enum IntervalCubic {
+    NotYet,
+    /// Some bracketing curve does not reach the point's u_s.
+    Unavailable,
+    /// a(x) = y1 + d1 s + c2 s^2 + c3 s^3 with s = x - x1.
+    Cubic {
+        x1: f64,
+        y1: f64,
+        d1: f64,
+        c2: f64,
+        c3: f64,
+    },
+}
+
+/// The table's (a, d a / d ln E2) of one point at one node.
+#[derive(Debug, Clone, Copy)]
+enum NodeValue {
+    NotYet,
+    Unavailable,
+    At(f64, f64),
+}
+
+/// The cubic through (x1, y1) with slope d1 and (x2, y2) with slope d2.
+fn hermite(x1: f64, y1: f64, d1: f64, x2: f64, y2: f64, d2: f64) -> IntervalCubic {
+    let l = x2 - x1;
+    let slope = (y2 - y1) / l;
+    IntervalCubic::Cubic {
+        x1,
+        y1,
+        d1,
+        c2: (3.0 * slope - 2.0 * d1 - d2) / l,
+        c3: (d1 + d2 - 2.0 * slope) / (l * l),
+    }
+}
+
 struct Problem<'m, 'a> {
     model: &'m LutModel<'a>,
     points: &'m [FitPoint],
     /// Weight of load residuals (sigma_a / sigma_P), 0 without the load channel.
     load_weight: f64,
+    /// ln of the table's modulus nodes.
+    ln_nodes: Vec<f64>,
+    /// cubics[interval * points.len() + point], filled on first use.
+    cubics: std::cell::RefCell<Vec<IntervalCubic>>,
+    /// node_values[node * points.len() + point], filled on first use.
+    node_values: std::cell::RefCell<Vec<NodeValue>>,
 }
 
-impl Problem<'_, '_> {
+impl<'m, 'a> Problem<'m, 'a> {
+    fn new(model: &'m LutModel<'a>, points: &'m [FitPoint], load_weight: f64) -> Self {
+        let ln_nodes: Vec<f64> = model.moduli_kpa().iter().map(|e| e.ln()).collect();
+        let cells = ln_nodes.len().saturating_sub(1) * points.len();
+        Self {
+            model,
+            points,
+            load_weight,
+            cubics: std::cell::RefCell::new(vec![IntervalCubic::NotYet; cells]),
+            node_values: std::cell::RefCell::new(vec![
+                NodeValue::NotYet;
+                ln_nodes.len() * points.len()
+            ]),
+            ln_nodes,
+        }
+    }
+
+    /// The table's a and slope of point `i` at node `k`.
+    fn node_value(&self, i: usize, k: usize) -> Option<(f64, f64)> {
+        let cell = k * self.points.len() + i;
+        let mut nodes = self.node_values.borrow_mut();
+        if let NodeValue::NotYet = nodes[cell] {
+            let p = &self.points[i];
+            nodes[cell] = match self
+                .model
+                .sample(self.model.moduli_kpa()[k], p.p_air_kpa, p.u_s_mm)
+            {
+                Ok(s) => NodeValue::At(s.a_mm, s.da_dln_modulus_mm),
+                Err(_) => NodeValue::Unavailable,
+            };
+        }
+        match nodes[cell] {
+            NodeValue::At(a, d) => Some((a, d)),
+            _ => None,
+        }
+    }
+
+    /// a and d a / d ln E2 of point `i` at ln E2 = `x` (inside the table).
+    fn a_at(&self, i: usize, x: f64) -> Option<(f64, f64)> {
+        let nodes = &self.ln_nodes;
+        if nodes.len() < 2 || !(x >= nodes[0] && x <= nodes[nodes.len() - 1]) {
+            return None;
+        }
+        let k = nodes.partition_point(|&v| v <= x).clamp(1, nodes.len() - 1) - 1;
+        let cell = k * self.points.len() + i;
+        let known = self.cubics.borrow()[cell];
+        let cubic = match known {
+            IntervalCubic::NotYet => {
+                let c = match (self.node_value(i, k), self.node_value(i, k + 1)) {
+                    (Some((y1, d1)), Some((y2, d2))) => {
+                        hermite(nodes[k], y1, d1, nodes[k + 1], y2, d2)
+                    }
+                    _ => {
+                        let p = &self.points[i];
+                        let h = nodes[k + 1] - nodes[k];
+                        let (x1, x2) = (nodes[k] + h / 3.0, nodes[k] + 2.0 * h / 3.0);
+                        match (
+                            self.model.sample(x1.exp(), p.p_air_kpa, p.u_s_mm),
+                            self.model.sample(x2.exp(), p.p_air_kpa, p.u_s_mm),
+                        ) {
+                            (Ok(s1), Ok(s2)) => hermite(
+                                x1,
+                                s1.a_mm,
+                                s1.da_dln_modulus_mm,
+                                x2,
+                                s2.a_mm,
+                                s2.da_dln_modulus_mm,
+                            ),
+                            _ => IntervalCubic::Unavailable,
+                        }
+                    }
+                };
+                self.cubics.borrow_mut()[cell] = c;
+                c
+            }
+            c => c,
+        };
+        match cubic {
+            IntervalCubic::Cubic { x1, y1, d1, c2, c3 } => {
+                let s = x - x1;
+                Some((
+                    y1 + s * (d1 + s * (c2 + s * c3)),
+                    d1 + s * (2.0 * c2 + 3.0 * s * c3),
+                ))
+            }
+            _ => None,
+        }
+    }
+
+    /// Sum of squared a residuals at x (no allocation).
+    fn sum_sq_a(&self, x: f64, used: &[usize]) -> Option<f64> {
+        let mut s = 0.0;
+        for &i in used {
+            let (a, _) = self.a_at(i, x)?;
+            s += (self.points[i].a_mm - a).powi(2);
+        }
+        Some(s)
+    }
+
     /// Residuals (a, then weighted load) and d a / d ln E2 at x for the points `used`.
     fn eval(&self, x: f64, used: &[usize], want_j: bool) -> Option<(Vec<f64>, Vec<f64>)> {
         let e = x.exp();
         let mut r = Vec::with_capacity(used.len() * 2);
         let mut j = Vec::with_capacity(if want_j { used.len() * 2 } else { 0 });
+        if self.load_weight <= 0.0 {
+            for &i in used {
+                let (a, da) = self.a_at(i, x)?;
+                r.push(self.points[i].a_mm - a);
+                if want_j {
+                    j.push(da);
+                }
+            }
+            return Some((r, j));
+        }
         let mut rl = Vec::new();
         let mut jl = Vec::new();
         for &i in used {
@@ -195,6 +355,9 @@ impl Problem<'_, '_> {
     }
 
     fn sum_sq(&self, x: f64, used: &[usize]) -> Option<f64> {
+        if self.load_weight <= 0.0 {
+            return self.sum_sq_a(x, used);
+        }
         self.eval(x, used, false)
             .map(|(r, _)| r.iter().map(|v| v * v).sum())
     }
@@ -231,20 +394,32 @@ impl Problem<'_, '_> {
     }
 
     /// Least squares over `subset` of the points.
-    fn solve(&self, subset: &[usize], max_iterations: usize) -> Result<Core, FitError> {
+    fn solve(
+        &self,
+        subset: &[usize],
+        max_iterations: usize,
+        start_node: Option<usize>,
+    ) -> Result<Core, FitError> {
         let nodes = self.model.moduli_kpa().to_vec();
         // coarse scan: mean square residual at each node over the points it covers
         let mut best: Option<(usize, f64)> = None;
-        // (on at most ~40 evenly spread points: the scan only picks a bracket)
-        let stride = subset.len().div_ceil(40).max(1);
-        let scan: Vec<usize> = subset.iter().step_by(stride).copied().collect();
-        for (k, &e) in nodes.iter().enumerate() {
+        // (on at most ~16 evenly spread points: the scan only picks the bracket, and a
+        // bracket one node off is corrected by the bracket moves below)
+        let stride = subset.len().div_ceil(16).max(1);
+        let scan: Vec<usize> = if start_node.is_some() {
+            Vec::new()
+        } else {
+            subset.iter().step_by(stride).copied().collect()
+        };
+        if let Some(k) = start_node {
+            best = Some((k.min(nodes.len() - 1), 0.0));
+        }
+        for k in (0..nodes.len()).filter(|_| start_node.is_none()) {
             let mut sum = 0.0;
             let mut n = 0usize;
             for &i in &scan {
-                let p = &self.points[i];
-                if let Ok(s) = self.model.sample(e, p.p_air_kpa, p.u_s_mm) {
-                    sum += (p.a_mm - s.a_mm).powi(2);
+                if let Some((a, _)) = self.node_value(i, k) {
+                    sum += (self.points[i].a_mm - a).powi(2);
                     n += 1;
                 }
             }
@@ -403,12 +578,8 @@ pub fn fit_modulus(
     }
     pressures.sort_by(f64::total_cmp);
     let all: Vec<usize> = (0..points.len()).collect();
-    let a_only = Problem {
-        model,
-        points,
-        load_weight: 0.0,
-    };
-    let mut core = a_only.solve(&all, options.max_iterations)?;
+    let a_only = Problem::new(model, points, 0.0);
+    let mut core = a_only.solve(&all, options.max_iterations, None)?;
     let n = core.used.len();
     let sigma_a = (core.residuals[..n].iter().map(|r| r * r).sum::<f64>()
         / (n.saturating_sub(1).max(1)) as f64)
@@ -436,12 +607,8 @@ pub fn fit_modulus(
         }
         let sigma_p = (sum / m.max(1) as f64).sqrt();
         if sigma_p > 0.0 && sigma_a > 0.0 {
-            let with_load = Problem {
-                model,
-                points,
-                load_weight: sigma_a / sigma_p,
-            };
-            core = with_load.solve(&all, options.max_iterations)?;
+            let with_load = Problem::new(model, points, sigma_a / sigma_p);
+            core = with_load.solve(&all, options.max_iterations, None)?;
             load_used = true;
         }
     }
@@ -467,17 +634,25 @@ pub fn fit_modulus(
     tests.dedup();
     let mut replicate_moduli = Vec::new();
     if tests.len() >= 2 {
-        let problem = Problem {
-            model,
-            points,
-            load_weight: 0.0,
-        };
+        // the joint fit's problem (its cubics are reused), started at the node nearest
+        // the joint estimate (a replicate is the same sample: no coarse scan needed)
+        let problem = &a_only;
+        let start = model
+            .moduli_kpa()
+            .iter()
+            .enumerate()
+            .min_by(|a, b| {
+                (a.1.ln() - core.x)
+                    .abs()
+                    .total_cmp(&(b.1.ln() - core.x).abs())
+            })
+            .map(|(k, _)| k);
         for t in &tests {
             let subset: Vec<usize> = (0..points.len())
                 .filter(|&i| points[i].test == *t)
                 .collect();
             if subset.len() >= 3
-                && let Ok(c) = problem.solve(&subset, options.max_iterations)
+                && let Ok(c) = problem.solve(&subset, options.max_iterations, start)
             {
                 replicate_moduli.push(c.x.exp());
             }
@@ -568,7 +743,45 @@ pub fn fit_modulus(
 
 #[cfg(test)]
 mod tests {
-    use super::t975;
+    use super::*;
+
+    /// The per-interval cubics reproduce the table's own interpolation (value and slope)
+    /// to rounding: they are the same polynomial, obtained from the table's node values.
+    #[test]
+    fn interval_cubics_equal_the_table_interpolation() {
+        let path =
+            std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/fit_fixture.lut");
+        let lut = fem_core::lut::read_lut(&path).unwrap().lut;
+        let model = LutModel::new(&lut).unwrap();
+        let points: Vec<FitPoint> = (0..60)
+            .map(|k| FitPoint {
+                u_s_mm: 0.05 + 0.03 * f64::from(k),
+                a_mm: 1.0,
+                p_air_kpa: [15.0, 6.0, 9.7][k as usize % 3],
+                test: 0,
+                load_n: None,
+            })
+            .collect();
+        let problem = Problem::new(&model, &points, 0.0);
+        let (lo, hi) = (10.0f64.ln(), 1000.0f64.ln());
+        let mut compared = 0;
+        let mut worst: f64 = 0.0;
+        for m in 0..=200 {
+            let x = lo + (hi - lo) * f64::from(m) / 200.0;
+            for (i, p) in points.iter().enumerate() {
+                let table = model.sample(x.exp(), p.p_air_kpa, p.u_s_mm);
+                if let (Ok(t), Some((a, d))) = (&table, problem.a_at(i, x)) {
+                    worst = worst
+                        .max((t.a_mm - a).abs())
+                        .max((t.da_dln_modulus_mm - d).abs() * 1e-2);
+                    compared += 1;
+                }
+            }
+        }
+        eprintln!("{compared} compared, worst {worst:e}");
+        assert!(compared > 5000, "{compared}");
+        assert!(worst < 1e-9, "{worst}");
+    }
 
     #[test]
     fn t_quantiles_match_tables() {

@@ -187,3 +187,72 @@ pub fn write_fit_plots(
     svg.push_str("</svg>\n");
     std::fs::write(dir.join("residuals.svg"), svg)
 }
+
+/// Manometer pressure against time from a record's `samples.csv` (raw counts converted
+/// with the device's nominal transfer function, as `samples.csv` stores them), as
+/// `pressure.svg`. Returns the (t_s, p_kpa) trace plotted.
+pub fn write_pressure_trace(dir: &Path) -> std::io::Result<Vec<(f64, f64)>> {
+    let trace = pressure_trace(&dir.join("samples.csv"))?;
+    if trace.len() < 2 {
+        return Ok(trace);
+    }
+    let (t0, t1) = (trace[0].0, trace[trace.len() - 1].0);
+    let p_min = trace.iter().map(|q| q.1).fold(f64::INFINITY, f64::min);
+    let p_max = trace.iter().map(|q| q.1).fold(f64::NEG_INFINITY, f64::max);
+    let pad = ((p_max - p_min) * 0.1).max(0.05);
+    let ax = Axes {
+        x0: t0,
+        x1: t1.max(t0 + 1e-3),
+        y0: p_min - pad,
+        y1: p_max + pad,
+    };
+    let mut svg = header();
+    ax.frame(
+        &mut svg,
+        "pressure trace",
+        "t (s)",
+        "p (kPa, gauge reading)",
+    );
+    ax.polyline(&mut svg, &decimate(&trace, 2000), "#236", false);
+    svg.push_str("</svg>\n");
+    std::fs::write(dir.join("pressure.svg"), svg)?;
+    Ok(trace)
+}
+
+/// At most `n` points, evenly picked.
+fn decimate(v: &[(f64, f64)], n: usize) -> Vec<(f64, f64)> {
+    let step = v.len().div_ceil(n.max(1)).max(1);
+    v.iter().step_by(step).copied().collect()
+}
+
+/// (t_s from the first sample, manometer kPa) from `samples.csv`: columns `host_time_us`
+/// and `manometer_counts`, p = (counts - 6554) x 9.5367e-4 kPa (README: manometer).
+pub fn pressure_trace(samples_csv: &Path) -> std::io::Result<Vec<(f64, f64)>> {
+    let text = std::fs::read_to_string(samples_csv)?;
+    let mut lines = text.lines();
+    let header = lines.next().unwrap_or_default();
+    let col = |name: &str| header.split(',').position(|c| c == name);
+    let (Some(it), Some(ip)) = (col("host_time_us"), col("manometer_counts")) else {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!(
+                "{}: header lacks host_time_us or manometer_counts",
+                samples_csv.display()
+            ),
+        ));
+    };
+    let mut out = Vec::new();
+    let mut t0 = None;
+    for line in lines {
+        let f: Vec<&str> = line.split(',').collect();
+        let (Some(t), Some(c)) = (
+            f.get(it).and_then(|s| s.parse::<f64>().ok()),
+            f.get(ip).and_then(|s| s.parse::<f64>().ok()),
+        ) else {
+            continue;
+        };
+        let t0 = *t0.get_or_insert(t);
+        out.push(((t - t0) * 1e-6, (c - 6554.0) * 9.5367e-4));
+    }
+    Ok(out)
+}

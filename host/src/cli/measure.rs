@@ -1,0 +1,184 @@
+//! `tactile measure`: one experiment on the real bench — stored calibrations applied,
+//! `--repeats` indentations at `--pressure`, frames from a V4L2 camera, the record written
+//! and the modulus printed with its interval.
+
+use clap::Args;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Duration;
+
+use host::calibration::{CalibrationRecord, load_latest};
+use host::camera::{PixelFormat, V4l2Config, V4l2Source};
+use host::experiment::IndentationPlan;
+use host::experiment::camera_radius::{CameraRadiusSource, capture_reference};
+use host::experiment::measurement::{LutInfo, run_measurement};
+use host::fit::LutModel;
+use host::link::{Link, LinkConfig, SerialTransport};
+use host::records::{RecordDir, unix_now_s, utc_stamp};
+
+#[derive(Debug, Args)]
+pub struct MeasureArgs {
+    /// Serial port of the controller.
+    #[arg(long)]
+    pub port: String,
+    /// V4L2 camera device (e.g. /dev/video0).
+    #[arg(long)]
+    pub camera: PathBuf,
+    /// Internal pressure (kPa).
+    #[arg(long, default_value_t = 6.0)]
+    pub pressure: f64,
+    /// Stage position where each indentation starts, above the sample (mm).
+    #[arg(long)]
+    pub start: f64,
+    /// Stage travel of each indentation (mm).
+    #[arg(long, default_value_t = 1.7)]
+    pub depth: f64,
+    /// Stage speed (mm/s).
+    #[arg(long, default_value_t = 2.0)]
+    pub speed: f64,
+    /// Indentations.
+    #[arg(long, default_value_t = 5)]
+    pub repeats: u32,
+    /// Sample stream rate (Hz).
+    #[arg(long, default_value_t = 2000)]
+    pub rate: u16,
+    /// Record directory (default: records/measure-<UTC time>).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Directory of calibration records (the newest is applied).
+    #[arg(long, default_value = "calibration")]
+    pub calibration_dir: PathBuf,
+    /// A specific calibration record instead of the newest in --calibration-dir.
+    #[arg(long)]
+    pub calibration: Option<PathBuf>,
+    /// Lookup table for the fit (default: fem-core/data/default.lut of this source tree).
+    #[arg(long)]
+    pub lut: Option<PathBuf>,
+    /// Print one JSON object.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// The shipped production table next to this crate.
+pub fn default_lut_path() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../fem-core/data/default.lut")
+}
+
+fn load_calibration(args: &MeasureArgs) -> Result<(PathBuf, CalibrationRecord), String> {
+    match &args.calibration {
+        Some(p) => {
+            let text = std::fs::read_to_string(p).map_err(|e| format!("{}: {e}", p.display()))?;
+            let r = serde_json::from_str(&text)
+                .map_err(|e| format!("{}: not a calibration record: {e}", p.display()))?;
+            Ok((p.clone(), r))
+        }
+        None => load_latest(&args.calibration_dir).map_err(|e| e.to_string()),
+    }
+}
+
+pub fn run(args: MeasureArgs) -> ExitCode {
+    let input = |e: String| {
+        eprintln!("error: {e}");
+        ExitCode::from(2)
+    };
+    let (cal_path, calibration) = match load_calibration(&args) {
+        Ok(c) => c,
+        Err(e) => return input(e),
+    };
+    let lut_path = args.lut.clone().unwrap_or_else(default_lut_path);
+    let lut_file = match fem_core::lut::read_lut(&lut_path) {
+        Ok(f) => f,
+        Err(e) => return input(format!("lookup table {}: {e}", lut_path.display())),
+    };
+    let model = match LutModel::new(&lut_file.lut) {
+        Ok(m) => m,
+        Err(e) => return input(format!("lookup table {}: {e}", lut_path.display())),
+    };
+    let out = args.out.clone().unwrap_or_else(|| {
+        PathBuf::from("records").join(format!("measure-{}", utc_stamp(unix_now_s())))
+    });
+    let fail = |e: String| {
+        eprintln!("error: {e}");
+        ExitCode::from(1)
+    };
+    let record = match RecordDir::create(&out) {
+        Ok(r) => r,
+        Err(e) => return input(e.to_string()),
+    };
+    let transport = match SerialTransport::open(&args.port) {
+        Ok(t) => t,
+        Err(e) => return fail(e.to_string()),
+    };
+    let mut link = match Link::connect(
+        Box::new(transport),
+        LinkConfig {
+            // USB CDC on a busy host, or an emulated bench behind a loaded CPU: be patient
+            request_timeout: Duration::from_millis(1000),
+            ..LinkConfig::default()
+        },
+    ) {
+        Ok(l) => l,
+        Err(e) => return fail(e.to_string()),
+    };
+    tracing::info!(calibration = %cal_path.display(), lut = %lut_path.display(), "measuring");
+    let plan = IndentationPlan {
+        pressure_kpa: args.pressure,
+        start_mm: args.start,
+        depth_mm: args.depth,
+        speed_mm_per_s: args.speed,
+        repeats: args.repeats,
+        stream_rate_hz: args.rate,
+    };
+    let progress = if args.json {
+        indicatif::ProgressBar::hidden()
+    } else {
+        indicatif::ProgressBar::new(u64::from(args.repeats))
+    };
+    let camera = args.camera.clone();
+    let lut = LutInfo {
+        path: lut_path.display().to_string(),
+        sha256: lut_file.sha256.clone(),
+    };
+    let result = run_measurement(
+        &mut link,
+        &calibration,
+        &plan,
+        &record,
+        &model,
+        &lut,
+        &progress,
+        |_link, px| {
+            let mut source = V4l2Source::open(&V4l2Config {
+                device: Some(camera),
+                preferred: PixelFormat::Gray8,
+                ..V4l2Config::default()
+            })
+            .map_err(|e| e.to_string())?;
+            let reference = capture_reference(&mut source, 10).map_err(|e| e.to_string())?;
+            let s = CameraRadiusSource::start(source, reference, px).map_err(|e| e.to_string())?;
+            Ok(Box::new(s))
+        },
+    );
+    progress.finish_and_clear();
+    match result {
+        Ok(report) => {
+            if args.json {
+                println!("{}", serde_json::to_string(&report).unwrap_or_default());
+            } else {
+                println!(
+                    "E2 = {:.1} kPa (95 % CI {:.1} .. {:.1} kPa), residual RMS {:.4} mm",
+                    report.modulus_kpa,
+                    report.ci95_kpa[0],
+                    report.ci95_kpa[1],
+                    report.rms_residual_mm
+                );
+                println!("record: {}", report.record_dir);
+                for n in &report.notes {
+                    println!("note: {n}");
+                }
+            }
+            ExitCode::SUCCESS
+        }
+        Err(e) => fail(format!("{e} (record: {})", out.display())),
+    }
+}
