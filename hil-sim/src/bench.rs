@@ -20,6 +20,17 @@
 //! The PTY: `serialport::TTYPort::pair()`; the slave end is kept open for the bench's
 //! lifetime so the host can open and close its path at will; modem-control lines do not
 //! exist on a PTY (ENOTTY), and nothing here depends on them.
+//!
+//! The cable ([`BenchPlug`]): `unplug()` does what pulling the USB cable of a bus-powered
+//! RP2040 does: the device loses power (the simulation stops, no frames), the serial port
+//! disappears (both PTY ends are closed, so a host holding the port open reads EIO) and the
+//! path is gone. `replug()` powers a fresh device up (the firmware boots again: pressure
+//! off, stage at its boot position, same serial number) on a new PTY, possibly under a new
+//! path ([`BenchPlug::pty_path`]). Camera frames keep coming through the same channel.
+//!
+//! The probe ([`BenchProbe`]): ground truth for timing tests: while on, every controller
+//! tick's [`TruthSample`](crate::device::TruthSample) and every chunk of bytes the host wrote
+//! (with the simulated time it was read) are kept.
 
 use std::io::{ErrorKind, Read, Write};
 use std::path::PathBuf;
@@ -71,6 +82,90 @@ pub struct BenchHandle {
     epoch: Arc<Mutex<Option<Instant>>>,
     stop: Arc<AtomicBool>,
     thread: Option<JoinHandle<SimStats>>,
+    plug: BenchPlug,
+    probe: BenchProbe,
+}
+
+/// The simulated USB cable (see the module docs); cheap to clone and `Send + Sync`.
+#[derive(Debug, Clone)]
+pub struct BenchPlug {
+    plugged: Arc<AtomicBool>,
+    path: Arc<Mutex<Option<PathBuf>>>,
+}
+
+impl BenchPlug {
+    /// Pulls the cable: the device loses power and its port disappears.
+    pub fn unplug(&self) {
+        self.plugged.store(false, Ordering::SeqCst);
+    }
+
+    /// Plugs the cable back in: a freshly booted device on a new port.
+    pub fn replug(&self) {
+        self.plugged.store(true, Ordering::SeqCst);
+    }
+
+    /// True while the cable is in (the port may take a moment to appear after `replug`).
+    pub fn is_plugged(&self) -> bool {
+        self.plugged.load(Ordering::SeqCst)
+    }
+
+    /// The port's current path, `None` while unplugged.
+    pub fn pty_path(&self) -> Option<PathBuf> {
+        self.path.lock().ok().and_then(|p| p.clone())
+    }
+}
+
+/// Bytes the host wrote, with the simulated host time (s) at which the bench read them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HostWrite {
+    pub t_s: f64,
+    pub bytes: Vec<u8>,
+}
+
+#[derive(Debug, Default)]
+struct ProbeState {
+    on: bool,
+    writes: Vec<HostWrite>,
+    truth: Vec<crate::device::TruthSample>,
+}
+
+/// Ground-truth recorder (see the module docs); cheap to clone and `Send + Sync`.
+#[derive(Debug, Clone, Default)]
+pub struct BenchProbe {
+    state: Arc<Mutex<ProbeState>>,
+    epoch: Arc<Mutex<Option<Instant>>>,
+}
+
+impl BenchProbe {
+    /// Starts recording (clears what was recorded).
+    pub fn start(&self) {
+        if let Ok(mut s) = self.state.lock() {
+            *s = ProbeState {
+                on: true,
+                ..ProbeState::default()
+            };
+        }
+    }
+
+    /// Stops recording and returns the host writes and the per-tick truth.
+    pub fn take(&self) -> (Vec<HostWrite>, Vec<crate::device::TruthSample>) {
+        self.state
+            .lock()
+            .map(|mut s| {
+                s.on = false;
+                (std::mem::take(&mut s.writes), std::mem::take(&mut s.truth))
+            })
+            .unwrap_or_default()
+    }
+
+    /// As [`BenchHandle::epoch`] (of the device powered now).
+    pub fn epoch(&self) -> Option<Instant> {
+        self.epoch.lock().ok().and_then(|e| *e)
+    }
+
+    fn is_on(&self) -> bool {
+        self.state.lock().map(|s| s.on).unwrap_or(false)
+    }
 }
 
 impl BenchHandle {
@@ -83,6 +178,16 @@ impl BenchHandle {
     /// before, or if the simulation ran ahead further than the monotonic clock reaches back).
     pub fn epoch(&self) -> Option<Instant> {
         self.epoch.lock().ok().and_then(|e| *e)
+    }
+
+    /// The cable (unplug / replug, current port path).
+    pub fn plug(&self) -> BenchPlug {
+        self.plug.clone()
+    }
+
+    /// The ground-truth recorder.
+    pub fn probe(&self) -> BenchProbe {
+        self.probe.clone()
     }
 
     /// Stops the simulation and returns its counters.
@@ -124,16 +229,71 @@ pub fn start_device(mut device: SimDevice, options: BenchOptions) -> Result<Benc
     let (frame_tx, frames) = sync_channel(options.frame_queue.max(1));
     let stop = Arc::new(AtomicBool::new(false));
     let epoch = Arc::new(Mutex::new(None));
+    let plug = BenchPlug {
+        plugged: Arc::new(AtomicBool::new(true)),
+        path: Arc::new(Mutex::new(Some(pty_path.clone()))),
+    };
+    let probe = BenchProbe {
+        state: Arc::default(),
+        epoch: Arc::clone(&epoch),
+    };
     let thread = {
         let stop = Arc::clone(&stop);
         let epoch = Arc::clone(&epoch);
+        let plug = plug.clone();
+        let probe = probe.clone();
         std::thread::Builder::new()
             .name("hil-sim".into())
             .spawn(move || {
-                // The slave end stays open as long as the simulation runs.
-                let _slave = slave;
-                serve(&mut device, &mut master, &frame_tx, &options, &stop, &epoch);
-                device.stats()
+                let mut total = SimStats::default();
+                let mut options = options;
+                let mut pty = Some((master, slave));
+                loop {
+                    if let Some((mut master, slave)) = pty.take() {
+                        // The slave end stays open as long as the device is powered.
+                        let _slave = slave;
+                        let wiring = Wiring {
+                            frame_tx: &frame_tx,
+                            stop: &stop,
+                            epoch: &epoch,
+                            plug: &plug,
+                            probe: &probe,
+                        };
+                        serve(&mut device, &mut master, &options, &wiring);
+                    }
+                    add_stats(&mut total, device.stats());
+                    if stop.load(Ordering::SeqCst) {
+                        return total;
+                    }
+                    // Unplugged: no power, no port.
+                    if let Ok(mut p) = plug.path.lock() {
+                        *p = None;
+                    }
+                    while !plug.is_plugged() {
+                        if stop.load(Ordering::SeqCst) {
+                            return total;
+                        }
+                        std::thread::sleep(Duration::from_millis(5));
+                    }
+                    // Plugged back in: a fresh boot on a new port, in real time at once
+                    // (the host is attached).
+                    let scenario = device.scenario().clone();
+                    match (SimDevice::new(scenario), TTYPort::pair()) {
+                        (Ok(fresh), Ok((m, s))) => {
+                            device = fresh;
+                            let mut m = m;
+                            if m.set_timeout(Duration::from_millis(0)).is_err() {
+                                return total;
+                            }
+                            if let Ok(mut p) = plug.path.lock() {
+                                *p = s.name().map(PathBuf::from);
+                            }
+                            options.pacing = Pacing::RealTime;
+                            pty = Some((m, s));
+                        }
+                        _ => return total,
+                    }
+                }
             })
             .map_err(|e| SimError::Pty(e.to_string()))?
     };
@@ -143,7 +303,30 @@ pub fn start_device(mut device: SimDevice, options: BenchOptions) -> Result<Benc
         epoch,
         stop,
         thread: Some(thread),
+        plug,
+        probe,
     })
+}
+
+fn add_stats(total: &mut SimStats, s: SimStats) {
+    total.ticks += s.ticks;
+    total.frames_rendered += s.frames_rendered;
+    total.frames_dropped += s.frames_dropped;
+    total.bytes_to_host += s.bytes_to_host;
+    total.bytes_dropped += s.bytes_dropped;
+    total.bytes_corrupted += s.bytes_corrupted;
+    total.programme_nacks += s.programme_nacks;
+    total.rx_frame_errors += s.rx_frame_errors;
+    total.beyond_mechanics_data_ticks += s.beyond_mechanics_data_ticks;
+}
+
+/// What the serving loop shares with the handle.
+struct Wiring<'a> {
+    frame_tx: &'a SyncSender<crate::device::SimFrame>,
+    stop: &'a AtomicBool,
+    epoch: &'a Mutex<Option<Instant>>,
+    plug: &'a BenchPlug,
+    probe: &'a BenchProbe,
 }
 
 /// How much faster than real time `Auto` runs while no host has spoken.
@@ -152,14 +335,18 @@ const AUTO_IDLE_SPEEDUP: f64 = 20.0;
 /// Ticks simulated per batch between I/O polls.
 const TICKS_PER_BATCH: usize = 2;
 
-fn serve(
-    device: &mut SimDevice,
-    port: &mut TTYPort,
-    frame_tx: &SyncSender<crate::device::SimFrame>,
-    options: &BenchOptions,
-    stop: &AtomicBool,
-    epoch: &Mutex<Option<Instant>>,
-) {
+/// Serves one powered-up device until the bench stops or the cable is pulled.
+fn serve(device: &mut SimDevice, port: &mut TTYPort, options: &BenchOptions, wiring: &Wiring) {
+    let Wiring {
+        frame_tx,
+        stop,
+        epoch,
+        plug,
+        probe,
+    } = *wiring;
+    let mut probing = false;
+    // The device keeps recording once asked to: discard what nobody wants.
+    let mut probed = false;
     let mut real_time = options.pacing == Pacing::RealTime;
     // Real time: simulated time = anchor_sim_s + anchor.elapsed().
     let mut anchor = Instant::now();
@@ -170,7 +357,13 @@ fn serve(
     let mut buf = [0u8; 4096];
     let mut pending_out: Vec<u8> = Vec::new();
     device.set_camera_enabled(options.camera && options.pacing != Pacing::Auto);
-    while !stop.load(Ordering::SeqCst) {
+    while !stop.load(Ordering::SeqCst) && plug.is_plugged() {
+        let probe_on = probe.is_on();
+        if probe_on && !probing {
+            device.record_truth();
+        }
+        probed |= probe_on;
+        probing = probe_on;
         // Host -> device.
         match port.read(&mut buf) {
             Ok(n) if n > 0 => {
@@ -186,6 +379,12 @@ fn serve(
                     device.set_camera_enabled(options.camera);
                 }
                 let now = device.time_s();
+                if probing && let Ok(mut s) = probe.state.lock() {
+                    s.writes.push(HostWrite {
+                        t_s: now,
+                        bytes: buf[..n].to_vec(),
+                    });
+                }
                 device.host_write(&buf[..n], now);
             }
             Ok(_) => {}
@@ -238,6 +437,14 @@ fn serve(
             if pending_out.len() > 64 * 1024 {
                 pending_out.clear();
             }
+        }
+        if probing {
+            let truth = device.take_truth();
+            if let Ok(mut s) = probe.state.lock() {
+                s.truth.extend(truth);
+            }
+        } else if probed {
+            let _ = device.take_truth();
         }
         let sim_epoch = real_time
             .then(|| anchor.checked_sub(Duration::from_secs_f64(anchor_sim_s.max(0.0))))

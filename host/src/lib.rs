@@ -4,6 +4,8 @@
 pub mod calibration;
 pub mod camera;
 pub mod curve_csv;
+pub mod daemon;
+pub mod dashboard;
 pub mod experiment;
 pub mod fit;
 pub mod link;

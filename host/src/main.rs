@@ -29,6 +29,16 @@ enum Command {
     Fit(cli::fit::FitArgs),
     /// The whole measurement against the emulated bench: calibrate, measure, fit, record.
     Demo(cli::demo::DemoArgs),
+    /// The bench daemon: owns the instrument, runs queued experiments, serves the HTTP API.
+    Daemon(cli::daemon::DaemonArgs),
+    /// Ask the daemon for the instrument's state.
+    Status(cli::status::StatusArgs),
+    /// Emergency stop through the daemon (vent, pressure off, stage stop).
+    Stop(cli::stop::StopArgs),
+    /// Submit an experiment to the daemon and follow it.
+    Run(cli::run::RunArgs),
+    /// Live dashboard of the daemon: pressure, a–u_s curve and fit, stream losses, faults.
+    Watch(cli::watch::WatchArgs),
     /// Calibrate the bench: manometer zero, load tare, proximity sweep, camera px/mm.
     Calibrate(cli::calibrate::CalibrateArgs),
     /// One experiment on the bench: indent, pair frames with samples, fit, record.
@@ -45,6 +55,11 @@ fn main() -> ExitCode {
         Command::Fem(args) => cli::fem::run(args),
         Command::Fit(args) => cli::fit::run(args),
         Command::Demo(args) => cli::demo::run(args),
+        Command::Daemon(args) => cli::daemon::run(args),
+        Command::Status(args) => cli::status::run(args),
+        Command::Stop(args) => cli::stop::run(args),
+        Command::Run(args) => cli::run::run(args),
+        Command::Watch(args) => cli::watch::run(args),
         Command::Calibrate(args) => cli::calibrate::run(args),
         Command::Measure(args) => cli::measure::run(args),
     }

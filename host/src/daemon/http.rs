@@ -1,0 +1,454 @@
+//! The HTTP API (axum): routes, the security layer and the live feed (Server-Sent Events).
+//!
+//! Security, in the order it is checked for every request:
+//! 1. `Host` must name the daemon's own address (`127.0.0.1:PORT`, `localhost:PORT`,
+//!    `[::1]:PORT` on loopback, or the explicit listen address) and `Origin`, when present,
+//!    must be `http://` + one of those: a web page in the user's browser (DNS rebinding, a
+//!    cross-site form) gets 403;
+//! 2. `Authorization: Bearer <token>` must carry the token from the daemon's 0600 token
+//!    file: otherwise 401;
+//! 3. bodies are limited to [`MAX_BODY_BYTES`] (413), must be JSON (415), parse (400) and
+//!    validate (422, naming each bad field); nothing changes unless all of that passed.
+
+use std::convert::Infallible;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use axum::extract::rejection::JsonRejection;
+use axum::extract::{DefaultBodyLimit, FromRequest, Path, Request, State};
+use axum::http::{HeaderMap, StatusCode, header};
+use axum::middleware::Next;
+use axum::response::sse::{Event as SseEvent, KeepAlive, Sse};
+use axum::response::{IntoResponse, Response};
+use axum::routing::{get, post};
+use axum::{Json, Router};
+use futures_util::Stream;
+use tokio::sync::{broadcast, oneshot};
+
+use super::api::{
+    ApiError, Event, ExperimentRequest, FieldError, JobKind, MAX_BODY_BYTES, PressureRequest,
+    StopReport, VentRequest,
+};
+use super::guarded_transport::StopKind;
+use super::shared::{CancelError, Command, Shared};
+use super::token::tokens_equal;
+
+/// Who may talk to the daemon.
+#[derive(Debug, Clone)]
+pub struct Access {
+    pub token: String,
+    /// Acceptable `Host` header values (lower case).
+    pub hosts: Vec<String>,
+}
+
+impl Access {
+    /// The host names a daemon listening on `addr` answers to.
+    pub fn for_addr(addr: std::net::SocketAddr, token: String) -> Self {
+        let port = addr.port();
+        let mut hosts = vec![addr.to_string().to_ascii_lowercase()];
+        if addr.ip().is_loopback() {
+            for h in ["127.0.0.1", "localhost", "[::1]"] {
+                hosts.push(format!("{h}:{port}"));
+            }
+        }
+        hosts.dedup();
+        Self { token, hosts }
+    }
+}
+
+#[derive(Debug, Clone)]
+pub struct App {
+    pub shared: Arc<Shared>,
+    pub access: Arc<Access>,
+}
+
+/// A JSON error answer.
+pub fn error(status: StatusCode, message: impl Into<String>) -> Response {
+    (
+        status,
+        Json(ApiError {
+            error: message.into(),
+            fields: Vec::new(),
+        }),
+    )
+        .into_response()
+}
+
+fn field_errors(fields: Vec<FieldError>) -> Response {
+    (
+        StatusCode::UNPROCESSABLE_ENTITY,
+        Json(ApiError {
+            error: "invalid request body".into(),
+            fields,
+        }),
+    )
+        .into_response()
+}
+
+/// `Json<T>` whose rejections are JSON errors with the right status.
+#[derive(Debug)]
+pub struct Body<T>(pub T);
+
+impl<S, T> FromRequest<S> for Body<T>
+where
+    Json<T>: FromRequest<S, Rejection = JsonRejection>,
+    S: Send + Sync,
+{
+    type Rejection = Response;
+
+    async fn from_request(req: Request, state: &S) -> Result<Self, Self::Rejection> {
+        match Json::<T>::from_request(req, state).await {
+            Ok(Json(v)) => Ok(Body(v)),
+            Err(rejection) => {
+                let status = rejection.status();
+                let text = rejection.body_text();
+                Err(error(status, format!("request body: {text}")))
+            }
+        }
+    }
+}
+
+async fn guard(State(app): State<App>, req: Request, next: Next) -> Response {
+    let headers = req.headers();
+    let host = headers
+        .get(header::HOST)
+        .and_then(|h| h.to_str().ok())
+        .map(str::to_ascii_lowercase);
+    match host {
+        Some(h) if app.access.hosts.contains(&h) => {}
+        Some(h) => return error(StatusCode::FORBIDDEN, format!("foreign Host header: {h}")),
+        None => return error(StatusCode::FORBIDDEN, "missing Host header"),
+    }
+    if let Some(origin) = headers.get(header::ORIGIN) {
+        let ok = origin.to_str().ok().is_some_and(|o| {
+            let o = o.to_ascii_lowercase();
+            app.access.hosts.iter().any(|h| o == format!("http://{h}"))
+        });
+        if !ok {
+            return error(StatusCode::FORBIDDEN, "foreign Origin header");
+        }
+    }
+    if !authorized(headers, &app.access.token) {
+        return (
+            StatusCode::UNAUTHORIZED,
+            [(header::WWW_AUTHENTICATE, "Bearer")],
+            Json(ApiError {
+                error: "missing or wrong bearer token (see the daemon's token file)".into(),
+                fields: Vec::new(),
+            }),
+        )
+            .into_response();
+    }
+    next.run(req).await
+}
+
+fn authorized(headers: &HeaderMap, token: &str) -> bool {
+    headers
+        .get(header::AUTHORIZATION)
+        .and_then(|h| h.to_str().ok())
+        .and_then(|h| h.strip_prefix("Bearer "))
+        .is_some_and(|t| tokens_equal(t.trim(), token))
+}
+
+/// The router with every route and the security layer.
+pub fn router(app: App) -> Router {
+    Router::new()
+        .route("/v1/status", get(status))
+        .route("/v1/stop", post(emergency_stop))
+        .route("/v1/pressure", post(pressure))
+        .route("/v1/vent", post(vent))
+        .route("/v1/clear-fault", post(clear_fault))
+        .route("/v1/experiments", get(list_jobs).post(submit_experiment))
+        .route("/v1/experiments/{id}", get(get_job).delete(cancel_job))
+        .route("/v1/calibrations", get(list_calibrations).post(calibrate))
+        .route("/v1/calibrations/{name}", get(get_calibration))
+        .route("/v1/records", get(list_records))
+        .route("/v1/records/{name}", get(list_record_files))
+        .route("/v1/records/{name}/{file}", get(get_record_file))
+        .route("/v1/events", get(events))
+        .fallback(|| async { error(StatusCode::NOT_FOUND, "no such endpoint") })
+        .layer(axum::middleware::from_fn_with_state(app.clone(), guard))
+        .layer(DefaultBodyLimit::max(MAX_BODY_BYTES))
+        .with_state(app)
+}
+
+async fn status(State(app): State<App>) -> Response {
+    Json(app.shared.status()).into_response()
+}
+
+async fn send_command(
+    app: &App,
+    make: impl FnOnce(oneshot::Sender<Result<(), String>>) -> Command,
+) -> Response {
+    if !app.shared.status().connected {
+        return error(StatusCode::SERVICE_UNAVAILABLE, "device not connected");
+    }
+    if app.shared.status().current_job.is_some() {
+        return error(
+            StatusCode::CONFLICT,
+            "an experiment is running: cancel it first (emergency stop always works: POST /v1/stop)",
+        );
+    }
+    let (tx, rx) = oneshot::channel();
+    if app.shared.commands.send(make(tx)).is_err() {
+        return error(StatusCode::SERVICE_UNAVAILABLE, "device thread stopped");
+    }
+    match tokio::time::timeout(Duration::from_secs(5), rx).await {
+        Ok(Ok(Ok(()))) => Json(serde_json::json!({ "ok": true })).into_response(),
+        Ok(Ok(Err(e))) => error(StatusCode::BAD_GATEWAY, format!("device: {e}")),
+        _ => error(
+            StatusCode::GATEWAY_TIMEOUT,
+            "the device thread did not answer in 5 s",
+        ),
+    }
+}
+
+async fn pressure(State(app): State<App>, Body(req): Body<PressureRequest>) -> Response {
+    if !(req.kpa.is_finite() && (0.0..=15.0).contains(&req.kpa)) {
+        return field_errors(vec![FieldError {
+            field: "kpa".into(),
+            reason: format!("{} is outside 0..=15 kPa", req.kpa),
+        }]);
+    }
+    send_command(&app, |reply| Command::SetPressure {
+        kpa: req.kpa,
+        reply,
+    })
+    .await
+}
+
+async fn vent(State(app): State<App>, Body(req): Body<VentRequest>) -> Response {
+    send_command(&app, |reply| Command::Vent {
+        open: req.open,
+        reply,
+    })
+    .await
+}
+
+async fn clear_fault(State(app): State<App>) -> Response {
+    send_command(&app, |reply| Command::ClearFault { reply }).await
+}
+
+async fn emergency_stop(State(app): State<App>) -> Response {
+    let shared = &app.shared;
+    if !shared.status().connected {
+        return error(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "device not connected (a controller that lost power is vented and stopped)",
+        );
+    }
+    let started = Instant::now();
+    shared.switch.request(StopKind::Emergency);
+    shared
+        .emergency_stops
+        .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let running = shared.cancel_all("cancelled by emergency stop");
+    if let Some(id) = running {
+        shared.lock().cancel = Some(id);
+    }
+    let outcome = loop {
+        let o = shared.switch.outcome();
+        if o.acked_after.is_some() || started.elapsed() > Duration::from_secs(2) {
+            break o;
+        }
+        tokio::time::sleep(Duration::from_millis(1)).await;
+    };
+    let report = StopReport {
+        sent: outcome.sent_after.is_some(),
+        acknowledged: outcome.acked_after.is_some(),
+        sent_after_ms: outcome.sent_after.map(|d| d.as_secs_f64() * 1e3),
+        acknowledged_after_ms: outcome.acked_after.map(|d| d.as_secs_f64() * 1e3),
+        cancelled_job: running,
+    };
+    let _ = shared.events.send(Event::EmergencyStop {
+        acknowledged: report.acknowledged,
+    });
+    let status = if report.sent {
+        StatusCode::OK
+    } else {
+        StatusCode::GATEWAY_TIMEOUT
+    };
+    (status, Json(report)).into_response()
+}
+
+async fn submit_experiment(State(app): State<App>, Body(req): Body<ExperimentRequest>) -> Response {
+    if let Err(fields) = req.validate() {
+        return field_errors(fields);
+    }
+    let job = app.shared.submit(JobKind::Experiment, Some(req));
+    (StatusCode::ACCEPTED, Json(job)).into_response()
+}
+
+async fn list_jobs(State(app): State<App>) -> Response {
+    Json(app.shared.lock().jobs.clone()).into_response()
+}
+
+/// A job id from a URL (the error message for a 400).
+fn parse_id(id: &str) -> Result<u64, String> {
+    id.parse()
+        .map_err(|_| format!("job id {id:?} is not a number"))
+}
+
+async fn get_job(State(app): State<App>, Path(id): Path<String>) -> Response {
+    let id = match parse_id(&id) {
+        Ok(i) => i,
+        Err(r) => return error(StatusCode::BAD_REQUEST, r),
+    };
+    match app.shared.lock().jobs.iter().find(|j| j.id == id) {
+        Some(j) => Json(j.clone()).into_response(),
+        None => error(StatusCode::NOT_FOUND, format!("no job {id}")),
+    }
+}
+
+async fn cancel_job(State(app): State<App>, Path(id): Path<String>) -> Response {
+    let id = match parse_id(&id) {
+        Ok(i) => i,
+        Err(r) => return error(StatusCode::BAD_REQUEST, r),
+    };
+    match app.shared.cancel(id) {
+        Ok(job) => Json(job).into_response(),
+        Err(CancelError::NotFound) => error(StatusCode::NOT_FOUND, format!("no job {id}")),
+        Err(CancelError::Finished(s)) => error(
+            StatusCode::CONFLICT,
+            format!("job {id} already ended ({s:?})"),
+        ),
+    }
+}
+
+async fn calibrate(State(app): State<App>) -> Response {
+    if !app.shared.can_calibrate {
+        return error(
+            StatusCode::NOT_IMPLEMENTED,
+            "calibration through the daemon needs the simulated bench (--sim); on real hardware put a calibration record in <records>/calibrations",
+        );
+    }
+    let job = app.shared.submit(JobKind::Calibration, None);
+    (StatusCode::ACCEPTED, Json(job)).into_response()
+}
+
+/// A file or directory name from a URL: no separators, no leading dot (the error message
+/// for a 400 otherwise).
+fn safe_name(name: &str) -> Result<&str, String> {
+    let ok = !name.is_empty()
+        && !name.starts_with('.')
+        && name.len() <= 200
+        && name
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b"._-".contains(&b));
+    if ok {
+        Ok(name)
+    } else {
+        Err(format!("bad name {name:?}"))
+    }
+}
+
+fn list_dir(dir: &std::path::Path, dirs: bool) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .map(|it| {
+            it.filter_map(Result::ok)
+                .filter(|e| e.file_type().is_ok_and(|t| t.is_dir() == dirs))
+                .filter_map(|e| e.file_name().to_str().map(String::from))
+                .filter(|n| !n.starts_with('.') && n != "calibrations")
+                .collect()
+        })
+        .unwrap_or_default();
+    names.sort();
+    names
+}
+
+async fn list_calibrations(State(app): State<App>) -> Response {
+    Json(list_dir(&app.shared.calibrations_dir, false)).into_response()
+}
+
+async fn get_calibration(State(app): State<App>, Path(name): Path<String>) -> Response {
+    let name = match safe_name(&name) {
+        Ok(n) => n,
+        Err(r) => return error(StatusCode::BAD_REQUEST, r),
+    };
+    send_file(&app.shared.calibrations_dir.join(name)).await
+}
+
+async fn list_records(State(app): State<App>) -> Response {
+    let dir = &app.shared.records_dir;
+    let list: Vec<serde_json::Value> = list_dir(dir, true)
+        .into_iter()
+        .map(|n| {
+            let status = std::fs::read_to_string(dir.join(&n).join("meta.json"))
+                .ok()
+                .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+                .and_then(|m| m.get("status").cloned())
+                .unwrap_or(serde_json::Value::Null);
+            serde_json::json!({ "name": n, "status": status })
+        })
+        .collect();
+    Json(list).into_response()
+}
+
+async fn list_record_files(State(app): State<App>, Path(name): Path<String>) -> Response {
+    let name = match safe_name(&name) {
+        Ok(n) => n,
+        Err(r) => return error(StatusCode::BAD_REQUEST, r),
+    };
+    let dir = app.shared.records_dir.join(name);
+    if !dir.is_dir() {
+        return error(StatusCode::NOT_FOUND, format!("no record {name}"));
+    }
+    Json(list_dir(&dir, false)).into_response()
+}
+
+async fn get_record_file(
+    State(app): State<App>,
+    Path((name, file)): Path<(String, String)>,
+) -> Response {
+    let (name, file) = match (safe_name(&name), safe_name(&file)) {
+        (Ok(n), Ok(f)) => (n, f),
+        (Err(r), _) | (_, Err(r)) => return error(StatusCode::BAD_REQUEST, r),
+    };
+    send_file(&app.shared.records_dir.join(name).join(file)).await
+}
+
+async fn send_file(path: &std::path::Path) -> Response {
+    let kind = match path.extension().and_then(|e| e.to_str()) {
+        Some("json") => "application/json",
+        Some("csv") => "text/csv; charset=utf-8",
+        Some("svg") => "image/svg+xml",
+        _ => "application/octet-stream",
+    };
+    match tokio::task::spawn_blocking({
+        let path = path.to_path_buf();
+        move || std::fs::read(path)
+    })
+    .await
+    {
+        Ok(Ok(bytes)) => ([(header::CONTENT_TYPE, kind)], bytes).into_response(),
+        _ => error(
+            StatusCode::NOT_FOUND,
+            format!(
+                "no file {}",
+                path.file_name()
+                    .map(|n| n.to_string_lossy())
+                    .unwrap_or_default()
+            ),
+        ),
+    }
+}
+
+fn to_sse(event: &Event) -> SseEvent {
+    SseEvent::default()
+        .event(event.name())
+        .data(serde_json::to_string(event).unwrap_or_default())
+}
+
+async fn events(State(app): State<App>) -> Sse<impl Stream<Item = Result<SseEvent, Infallible>>> {
+    let rx = app.shared.events.subscribe();
+    let stream = futures_util::stream::unfold(rx, |mut rx| async move {
+        match rx.recv().await {
+            Ok(ev) => Some((Ok(to_sse(&ev)), rx)),
+            Err(broadcast::error::RecvError::Lagged(n)) => {
+                Some((Ok(to_sse(&Event::Lagged { skipped: n })), rx))
+            }
+            Err(broadcast::error::RecvError::Closed) => None,
+        }
+    });
+    Sse::new(stream).keep_alive(KeepAlive::default())
+}
