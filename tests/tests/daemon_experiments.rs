@@ -210,11 +210,12 @@ fn two_clients_watch_while_a_third_runs_an_experiment() {
 fn emergency_stop_during_an_experiment_vents_and_stops_within_one_control_period() {
     let b = calibrated("daemon-estop");
     let probe = b.daemon.sim_probe.clone().unwrap();
+    // Ground truth from before the experiment (the simulation may lag the wall clock on a
+    // loaded machine, so a probe started just before the stop could miss the ticks before).
+    probe.start();
     let job = b.client.submit(&short_run(3)).unwrap();
     wait_indenting(&b.client, job.id);
     std::thread::sleep(Duration::from_millis(300)); // mid-stroke
-    probe.start();
-    std::thread::sleep(Duration::from_millis(50)); // some ground truth before the stop
     let report = b.client.stop().unwrap();
     std::thread::sleep(Duration::from_millis(300));
     let (writes, truth) = probe.take();
