@@ -412,3 +412,169 @@ impl Transport for GuardedTransport {
         self.inner.name()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use protocol::{DeviceMessage, Reply, SampleBlock, StatusFlags};
+    use std::collections::VecDeque;
+    use std::sync::Mutex as StdMutex;
+
+    /// A device that records what it is sent and answers from a script.
+    struct FakePort {
+        written: Arc<StdMutex<Vec<u8>>>,
+        to_host: Arc<StdMutex<VecDeque<Vec<u8>>>>,
+    }
+
+    impl Transport for FakePort {
+        fn write_all(&mut self, bytes: &[u8]) -> Result<(), TransportError> {
+            self.written.lock().unwrap().extend_from_slice(bytes);
+            Ok(())
+        }
+        fn read_timeout(&mut self, buf: &mut [u8], _t: Duration) -> Result<usize, TransportError> {
+            match self.to_host.lock().unwrap().pop_front() {
+                Some(chunk) => {
+                    buf[..chunk.len()].copy_from_slice(&chunk);
+                    Ok(chunk.len())
+                }
+                None => Ok(0),
+            }
+        }
+        fn name(&self) -> String {
+            "fake".into()
+        }
+    }
+
+    fn frame(m: &DeviceMessage) -> Vec<u8> {
+        let mut buf = [0u8; MAX_FRAME_LEN];
+        let n = encode_frame(m, &mut buf).unwrap();
+        buf[..n].to_vec()
+    }
+
+    fn setup() -> (
+        GuardedTransport,
+        Arc<StopSwitch>,
+        Arc<StdMutex<Vec<u8>>>,
+        Arc<StdMutex<VecDeque<Vec<u8>>>>,
+    ) {
+        let (events, _) = broadcast::channel(64);
+        let switch = StopSwitch::new(events);
+        let written = Arc::new(StdMutex::new(Vec::new()));
+        let to_host = Arc::new(StdMutex::new(VecDeque::new()));
+        let port = FakePort {
+            written: written.clone(),
+            to_host: to_host.clone(),
+        };
+        (
+            GuardedTransport::new(Box::new(port), switch.clone()),
+            switch,
+            written,
+            to_host,
+        )
+    }
+
+    fn requests(bytes: &[u8]) -> Vec<RequestFrame> {
+        let mut d = FrameDecoder::<RequestFrame>::new();
+        d.push(bytes).flatten().collect()
+    }
+
+    #[test]
+    fn emergency_stop_goes_out_before_the_next_write_and_locks_the_link() {
+        let (mut t, switch, written, to_host) = setup();
+        t.write_all(b"hello").unwrap();
+        assert_eq!(&written.lock().unwrap()[..], b"hello");
+        written.lock().unwrap().clear();
+        // The device acknowledges the three stop frames.
+        for k in 0..3 {
+            to_host
+                .lock()
+                .unwrap()
+                .push_back(frame(&DeviceMessage::Ack {
+                    seq: STOP_SEQ_BASE + k,
+                    reply: Reply::Done,
+                }));
+        }
+        switch.request(StopKind::Emergency);
+        let e = t.write_all(b"MoveStage").unwrap_err();
+        assert!(e.to_string().contains("emergency stop"), "{e}");
+        let sent = requests(&written.lock().unwrap());
+        let kinds: Vec<Request> = sent.iter().map(|f| f.request.clone()).collect();
+        assert_eq!(
+            kinds,
+            [
+                Request::Vent { open: true },
+                Request::PressureOff,
+                Request::StopStage
+            ],
+            "exactly the stop frames, nothing of the refused write"
+        );
+        let outcome = switch.outcome();
+        assert!(outcome.sent_after.is_some() && outcome.acked_after.is_some());
+        assert!(switch.is_locked());
+        assert!(t.write_all(b"SetPressure").is_err(), "stays locked");
+        switch.unlock();
+        t.write_all(b"ok").unwrap();
+    }
+
+    #[test]
+    fn a_pending_stop_is_sent_from_a_read() {
+        let (mut t, switch, written, _) = setup();
+        switch.request(StopKind::Cancel);
+        let mut buf = [0u8; 64];
+        // Reads time out in slices; the stop goes out in the first one.
+        let _ = t.read_timeout(&mut buf, Duration::from_millis(3));
+        let kinds: Vec<Request> = requests(&written.lock().unwrap())
+            .into_iter()
+            .map(|f| f.request)
+            .collect();
+        assert_eq!(kinds, [Request::StopStage, Request::PressureOff]);
+        assert!(
+            t.write_all(b"x")
+                .unwrap_err()
+                .to_string()
+                .contains("cancelled")
+        );
+    }
+
+    #[test]
+    fn tap_decimates_samples_and_counts_lost_blocks() {
+        let (mut t, switch, _, to_host) = setup();
+        let mut rx = switch.events.subscribe();
+        // 2 kHz for 100 ms in blocks of 8; block 5 is lost on the way.
+        for b in 0..25u32 {
+            if b == 5 {
+                continue;
+            }
+            let mut samples = heapless::Vec::new();
+            for k in 0..8u64 {
+                let _ = samples.push(protocol::Sample {
+                    device_time_us: (u64::from(b) * 8 + k) * 500,
+                    status: StatusFlags(0),
+                    ..protocol::Sample::default()
+                });
+            }
+            to_host
+                .lock()
+                .unwrap()
+                .push_back(frame(&DeviceMessage::Samples(SampleBlock {
+                    block_seq: b,
+                    samples,
+                })));
+        }
+        let mut buf = [0u8; 4096];
+        for _ in 0..30 {
+            let _ = t.read_timeout(&mut buf, Duration::from_millis(1));
+        }
+        let mut events = 0;
+        while let Ok(e) = rx.try_recv() {
+            if let Event::Sample { .. } = e {
+                events += 1;
+            }
+        }
+        // 96 ms of device time at one event per 10 ms: 10 events (the first, then every
+        // 10 ms of device time; blocks are 4 ms apart, so each event is 12 ms after the last).
+        assert!((8..=10).contains(&events), "{events} events");
+        assert_eq!(switch.blocks_lost.load(Ordering::Relaxed), 1);
+        assert_eq!(switch.samples_seen.load(Ordering::Relaxed), 24 * 8);
+    }
+}
