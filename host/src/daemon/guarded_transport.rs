@@ -451,12 +451,10 @@ mod tests {
         buf[..n].to_vec()
     }
 
-    fn setup() -> (
-        GuardedTransport,
-        Arc<StopSwitch>,
-        Arc<StdMutex<Vec<u8>>>,
-        Arc<StdMutex<VecDeque<Vec<u8>>>>,
-    ) {
+    type Written = Arc<StdMutex<Vec<u8>>>;
+    type Script = Arc<StdMutex<VecDeque<Vec<u8>>>>;
+
+    fn setup() -> (GuardedTransport, Arc<StopSwitch>, Written, Script) {
         let (events, _) = broadcast::channel(64);
         let switch = StopSwitch::new(events);
         let written = Arc::new(StdMutex::new(Vec::new()));
@@ -547,10 +545,10 @@ mod tests {
             }
             let mut samples = heapless::Vec::new();
             for k in 0..8u64 {
-                let _ = samples.push(protocol::Sample {
+                let _ = samples.push(Sample {
                     device_time_us: (u64::from(b) * 8 + k) * 500,
                     status: StatusFlags(0),
-                    ..protocol::Sample::default()
+                    ..Sample::default()
                 });
             }
             to_host
