@@ -57,7 +57,8 @@ fn daemon_share(a: &HashMap<String, u64>, b: &HashMap<String, u64>, wall_s: f64)
     let mut total = 0u64;
     let mut parts = Vec::new();
     for (name, tb) in b {
-        if name == "hil-sim" || name.starts_with("bench-client") || name == "daemon_feed-" {
+        if name == "hil-sim" || name.starts_with("bench-client") || name.starts_with("daemon_feed")
+        {
             continue;
         }
         let d = tb - a.get(name).copied().unwrap_or(0);

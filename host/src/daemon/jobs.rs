@@ -238,6 +238,10 @@ pub fn run_experiment(dt: &mut DeviceThread, link: &mut Link, job: Job) -> Optio
     }
     let stats = link.stats();
     meta["link"] = serde_json::to_value(stats).unwrap_or_default();
+    // The pressure trace plot, for complete and partial records alike.
+    if let Err(e) = crate::plots::write_pressure_trace(&record.dir) {
+        meta["notes"] = serde_json::json!([format!("pressure trace not plotted: {e}")]);
+    }
     meta["finished_unix_s"] = serde_json::json!(unix_now_s());
     match outcome {
         Ok((result, live_points)) => {
