@@ -114,6 +114,7 @@ pub fn sample_params(sample: &SampleConfig) -> CurveParams {
         sample_thickness_mm: sample.thickness_mm,
         friction: sample.friction,
         material: sample.law,
+        sample_stiffening: sample.stiffening,
         ..CurveParams::default()
     }
 }
@@ -143,6 +144,7 @@ pub fn lut_curves_for_sample(lut: &Lut, sample: &SampleConfig) -> Vec<Curve> {
     };
     let thickness = nearest(&grid.effects.sample_thickness_mm, sample.thickness_mm);
     let friction = nearest(&grid.effects.friction, sample.friction);
+    let stiffening = nearest(&grid.effects.stiffening, sample.stiffening);
     let law = if grid.effects.material.contains(&sample.law) {
         sample.law
     } else {
@@ -155,6 +157,7 @@ pub fn lut_curves_for_sample(lut: &Lut, sample: &SampleConfig) -> Vec<Curve> {
             let params = grid.curve_params(c.index);
             let keep = params.sample_thickness_mm == thickness
                 && params.friction == friction
+                && params.sample_stiffening == stiffening
                 && params.material == law;
             keep.then(|| Curve {
                 params,

@@ -31,6 +31,10 @@ pub struct SampleConfig {
     pub friction: f64,
     /// Constitutive law used by fem-core ("neo-hookean" or "linear").
     pub law: fem_core::MaterialLaw,
+    /// Strain stiffening of the sample in the FE truth: fem-core's Yeoh ratio c2/c1
+    /// (0 = neo-Hookean). A hidden effect computed by fem-core (unlike the approximate
+    /// `effects.strain_stiffening`).
+    pub stiffening: f64,
 }
 
 impl Default for SampleConfig {
@@ -44,6 +48,7 @@ impl Default for SampleConfig {
             radius_mm: 45.0,
             friction: 0.0,
             law: fem_core::MaterialLaw::NeoHookean,
+            stiffening: 0.0,
         }
     }
 }

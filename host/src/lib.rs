@@ -6,6 +6,7 @@ pub mod camera;
 pub mod curve_csv;
 pub mod daemon;
 pub mod dashboard;
+pub mod diagnosis;
 pub mod experiment;
 pub mod fit;
 pub mod link;

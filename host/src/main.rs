@@ -29,6 +29,8 @@ enum Command {
     Fit(cli::fit::FitArgs),
     /// The whole measurement against the emulated bench: calibrate, measure, fit, record.
     Demo(cli::demo::DemoArgs),
+    /// Where the model and a measurement disagree, which effect explains it, the gap before and after.
+    Diagnose(cli::diagnose::DiagnoseArgs),
     /// The bench daemon: owns the instrument, runs queued experiments, serves the HTTP API.
     Daemon(cli::daemon::DaemonArgs),
     /// Ask the daemon for the instrument's state.
@@ -55,6 +57,7 @@ fn main() -> ExitCode {
         Command::Fem(args) => cli::fem::run(args),
         Command::Fit(args) => cli::fit::run(args),
         Command::Demo(args) => cli::demo::run(args),
+        Command::Diagnose(args) => cli::diagnose::run(args),
         Command::Daemon(args) => cli::daemon::run(args),
         Command::Status(args) => cli::status::run(args),
         Command::Stop(args) => cli::stop::run(args),

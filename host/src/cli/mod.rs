@@ -4,6 +4,7 @@ pub mod calibrate;
 pub mod daemon;
 pub mod demo;
 pub mod devices;
+pub mod diagnose;
 pub mod fem;
 pub mod fit;
 pub mod flash;

@@ -1,0 +1,312 @@
+//! `tactile diagnose CURVE.csv... [--json] [--out DIR] [--lut FILE] [--effects FILE]...`:
+//! where the baseline model and the measurement disagree, which candidate effect explains it,
+//! and the gap before and after adding it (README "Diagnosis", DESIGN.md section 8).
+//!
+//! Also: `--build-tables DIR` builds the effect tables with fem-core; `--simulate
+//! EFFECT=SIZE --out DIR` writes hidden-effect curves from hil-sim (`none` for clean data);
+//! `--confusion FILE` runs the confusion-matrix study. Exit codes: 0 success, 1 the
+//! diagnosis failed, 2 bad input.
+
+use clap::Args;
+use host::diagnosis::tables::{
+    EffectAxis, EffectTable, build_effect_table, read_effect_table, shipped_tables_dir, sub_table,
+};
+use host::diagnosis::{DiagnoseOptions, data, diagnose, report};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Instant;
+
+#[derive(Debug, Args)]
+pub struct DiagnoseArgs {
+    /// Measured curves (CSV: u_s_mm,a_mm[,load_n,p_air_kpa,t_s,h_mm,phase,test]); one or
+    /// more pressures, replicates marked by the `test` column (or one file per replicate).
+    pub curves: Vec<PathBuf>,
+    /// Print one JSON object.
+    #[arg(long)]
+    pub json: bool,
+    /// Write report.txt, diagnosis.json and residuals.svg into this directory (with
+    /// --simulate: the simulated curve CSV).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Baseline table (default: the base slice of the effect tables, which match the
+    /// simulated bench's mesh; a table at another mesh level shows up as structure).
+    #[arg(long)]
+    pub lut: Option<PathBuf>,
+    /// Effect tables (repeatable; default fem-core/data/effects-{thickness,friction,stiffening}.lut).
+    #[arg(long)]
+    pub effects: Vec<PathBuf>,
+    /// Parametric-bootstrap draws for the decision threshold.
+    #[arg(long, default_value_t = 400)]
+    pub bootstrap: usize,
+    /// Reruns of the selection on data simulated from the augmented fit (confidence).
+    #[arg(long, default_value_t = 20)]
+    pub reruns: usize,
+    /// Seed of the bootstrap and confidence simulations (and of --simulate).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Build the effect tables into this directory (fem-core, mesh level -2) and exit.
+    #[arg(long, value_name = "DIR")]
+    pub build_tables: Option<PathBuf>,
+    /// With --build-tables: only these (thickness, friction, stiffening).
+    #[arg(long, value_delimiter = ',')]
+    pub only: Vec<String>,
+    /// Simulate hidden-effect data with hil-sim: EFFECT=SIZE (e.g. friction=0.4) or none;
+    /// writes simulated.csv into --out.
+    #[arg(long, value_name = "EFFECT=SIZE")]
+    pub simulate: Option<String>,
+    /// True modulus for --simulate.
+    #[arg(long, default_value_t = 170.0)]
+    pub modulus: f64,
+    /// Noise level for --simulate (1 = the demo's).
+    #[arg(long, default_value_t = 1.0)]
+    pub noise: f64,
+    /// Run the confusion-matrix study and write it (Markdown) to this file.
+    #[arg(long, value_name = "FILE")]
+    pub confusion: Option<PathBuf>,
+    /// Seeds per cell of the confusion matrix.
+    #[arg(long, default_value_t = 3)]
+    pub seeds: u64,
+}
+
+fn bad_input(e: impl std::fmt::Display) -> ExitCode {
+    eprintln!("error: {e}");
+    ExitCode::from(2)
+}
+
+pub fn run(args: DiagnoseArgs) -> ExitCode {
+    if let Some(dir) = &args.build_tables {
+        return build_tables(dir, &args.only);
+    }
+    if let Some(spec) = &args.simulate {
+        return simulate(&args, spec);
+    }
+    let (base, base_source, effects) = match load_tables(&args) {
+        Ok(t) => t,
+        Err(e) => return bad_input(e),
+    };
+    if let Some(file) = &args.confusion {
+        return confusion(&args, file, &base, &effects);
+    }
+    if args.curves.is_empty() {
+        return bad_input("no curve files given (tactile diagnose CURVE.csv...)");
+    }
+    let mut curves = Vec::new();
+    for path in &args.curves {
+        match host::curve_csv::read_curve_csv(path) {
+            Ok(c) => curves.push((path.display().to_string(), c)),
+            Err(e) => return bad_input(e),
+        }
+    }
+    let points = match data::points_from_curves(&curves) {
+        Ok(p) => p,
+        Err(e) => return bad_input(e),
+    };
+    let options = DiagnoseOptions {
+        bootstrap: args.bootstrap,
+        confidence_reruns: args.reruns,
+        seed: args.seed,
+        ..DiagnoseOptions::default()
+    };
+    let mut d = match diagnose(&base, &effects, points, &options) {
+        Ok(d) => d,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(1);
+        }
+    };
+    d.notes.push(format!("baseline table: {base_source}"));
+    if let Some(dir) = &args.out
+        && let Err(e) = report::write_outputs(&d, dir)
+    {
+        eprintln!("error: {}: {e}", dir.display());
+        return ExitCode::from(1);
+    }
+    if args.json {
+        println!("{}", report::json(&d));
+    } else {
+        print!("{}", report::text(&d));
+        if let Some(dir) = &args.out {
+            println!(
+                "wrote {}/report.txt, diagnosis.json, residuals.svg",
+                dir.display()
+            );
+        }
+    }
+    ExitCode::SUCCESS
+}
+
+type Tables = (fem_core::lut::Lut, String, Vec<EffectTable>);
+
+fn load_tables(args: &DiagnoseArgs) -> Result<Tables, String> {
+    let paths: Vec<PathBuf> = if args.effects.is_empty() {
+        EffectAxis::ALL
+            .iter()
+            .map(|a| shipped_tables_dir().join(a.file_name()))
+            .filter(|p| p.exists())
+            .collect()
+    } else {
+        args.effects.clone()
+    };
+    let mut effects = Vec::new();
+    for p in &paths {
+        effects.push(read_effect_table(p).map_err(|e| e.to_string())?);
+    }
+    let (base, source) = match &args.lut {
+        Some(p) => {
+            let f = fem_core::lut::read_lut(p).map_err(|e| format!("{}: {e}", p.display()))?;
+            (f.lut, format!("{} (sha256 {})", p.display(), f.sha256))
+        }
+        None => {
+            let t = effects.first().ok_or(
+                "no effect tables found (build them with tactile diagnose --build-tables fem-core/data) and no --lut given",
+            )?;
+            let sel = t.axis.select(t.axis.base_value());
+            let lut = sub_table(&t.lut, &sel).map_err(|e| format!("{}: {e}", t.path))?;
+            (
+                lut,
+                format!(
+                    "base slice of {} (same mesh and steps as the effect tables)",
+                    t.path
+                ),
+            )
+        }
+    };
+    Ok((base, source, effects))
+}
+
+fn simulate(args: &DiagnoseArgs, spec: &str) -> ExitCode {
+    use host::diagnosis::candidates::EffectKind;
+    use host::diagnosis::simulate::{Hidden, SimSpec, simulate, to_curve_csv};
+    let hidden = if spec == "none" {
+        None
+    } else {
+        let Some((name, size)) = spec.split_once('=') else {
+            return bad_input(format!("--simulate {spec}: expected EFFECT=SIZE or none"));
+        };
+        let Some(kind) = EffectKind::from_name(name) else {
+            return bad_input(format!(
+                "--simulate: unknown effect {name:?} (known: {})",
+                EffectKind::ALL.map(|k| k.name()).join(", ")
+            ));
+        };
+        let Ok(size) = size.parse::<f64>() else {
+            return bad_input(format!("--simulate: size {size:?} is not a number"));
+        };
+        Some(Hidden { kind, size })
+    };
+    let Some(dir) = &args.out else {
+        return bad_input("--simulate needs --out DIR");
+    };
+    let sim = SimSpec {
+        modulus_kpa: args.modulus,
+        hidden,
+        noise: args.noise,
+        seed: args.seed,
+        ..SimSpec::default()
+    };
+    let start = Instant::now();
+    let points = match simulate(&sim) {
+        Ok(p) => p,
+        Err(e) => {
+            eprintln!("error: simulation: {e}");
+            return ExitCode::from(1);
+        }
+    };
+    let text = match to_curve_csv(
+        &points,
+        "tactile diagnose --simulate (hil-sim truth; hidden effect not recorded)",
+    ) {
+        Ok(t) => t,
+        Err(e) => return bad_input(e),
+    };
+    let path = dir.join("simulated.csv");
+    if let Err(e) = std::fs::create_dir_all(dir).and_then(|_| std::fs::write(&path, text)) {
+        eprintln!("error: {}: {e}", path.display());
+        return ExitCode::from(1);
+    }
+    eprintln!(
+        "wrote {} ({} points) in {:.1} s",
+        path.display(),
+        points.len(),
+        start.elapsed().as_secs_f64()
+    );
+    ExitCode::SUCCESS
+}
+
+fn confusion(
+    args: &DiagnoseArgs,
+    file: &Path,
+    base: &fem_core::lut::Lut,
+    effects: &[EffectTable],
+) -> ExitCode {
+    use host::diagnosis::confusion::{ConfusionSpec, markdown, run};
+    let spec = ConfusionSpec {
+        seeds: args.seeds,
+        bootstrap: args.bootstrap,
+        modulus_kpa: args.modulus,
+        ..ConfusionSpec::default()
+    };
+    let start = Instant::now();
+    let rows = match run(&spec, base, effects, &|line| eprintln!("{line}")) {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(1);
+        }
+    };
+    let mut text = markdown(&spec, &rows);
+    text.push_str(&format!(
+        "\nWall time {:.0} s (`tactile diagnose --confusion {} --seeds {}`).\n",
+        start.elapsed().as_secs_f64(),
+        file.display(),
+        args.seeds
+    ));
+    if let Err(e) = std::fs::write(file, text) {
+        eprintln!("error: {}: {e}", file.display());
+        return ExitCode::from(1);
+    }
+    eprintln!("wrote {}", file.display());
+    ExitCode::SUCCESS
+}
+
+fn build_tables(dir: &Path, only: &[String]) -> ExitCode {
+    for axis in EffectAxis::ALL {
+        let name = match axis {
+            EffectAxis::Thickness => "thickness",
+            EffectAxis::Friction => "friction",
+            EffectAxis::Stiffening => "stiffening",
+        };
+        if !only.is_empty() && !only.iter().any(|o| o == name) {
+            continue;
+        }
+        let out = dir.join(axis.file_name());
+        let total = host::diagnosis::tables::effect_grid(axis).curve_count();
+        let done = AtomicUsize::new(0);
+        let report = |r: &fem_core::lut::CurveReport| {
+            let k = done.fetch_add(1, Ordering::Relaxed) + 1;
+            eprintln!(
+                "[{k:>4}/{total}] {:<48} {:>7.2} s{}",
+                r.what,
+                r.seconds,
+                r.failure
+                    .as_ref()
+                    .map(|f| format!("  FAILED: {f}"))
+                    .unwrap_or_default()
+            );
+        };
+        let start = Instant::now();
+        match build_effect_table(axis, &out, &report) {
+            Ok((hash, failed)) => eprintln!(
+                "wrote {} (sha256:{hash}, {failed} failed curve(s)) in {:.1} s wall",
+                out.display(),
+                start.elapsed().as_secs_f64()
+            ),
+            Err(e) => {
+                eprintln!("error: {}: {e}", out.display());
+                return ExitCode::from(2);
+            }
+        }
+    }
+    ExitCode::SUCCESS
+}

@@ -1,0 +1,175 @@
+//! Generalised least squares of the baseline or an augmented model: minimise the whitened
+//! chi^2 = |L^-1 (a - f(ln E2, theta))|^2 (L the Cholesky factor of the noise covariance)
+//! by Levenberg–Marquardt (Marquardt 1963) with forward-difference Jacobians and the
+//! effect parameter kept in its allowed range. The parameter covariance is (J^T J)^-1 in
+//! whitened units, inflated by max(1, chi^2/dof) when the fit is poor (the usual
+//! scale-factor correction), and the 95 % interval of E2 is exp(ln E2 +- 1.96 se).
+
+use serde::Serialize;
+
+use super::candidates::{Candidate, predict_a};
+use super::data::Point;
+use super::linalg;
+use super::model::Model;
+use super::noise_model::Whitener;
+
+/// Result of one fit.
+#[derive(Debug, Clone, Serialize)]
+pub struct GlsFit {
+    pub modulus_kpa: f64,
+    pub ci95_kpa: [f64; 2],
+    /// Effect parameter (0 for the baseline).
+    pub theta: f64,
+    pub theta_se: f64,
+    pub chi2: f64,
+    pub points: usize,
+    pub parameters: usize,
+    pub chi2_per_dof: f64,
+    pub rms_residual_mm: f64,
+    #[serde(skip)]
+    pub residuals_mm: Vec<f64>,
+    #[serde(skip)]
+    pub whitened: Vec<f64>,
+    pub iterations: usize,
+}
+
+/// Fits `cand` (or the baseline) to `points[subset]` starting at (e0, theta0).
+#[allow(clippy::too_many_arguments)]
+pub fn fit(
+    model: &Model<'_>,
+    cand: Option<&Candidate>,
+    points: &[Point],
+    subset: &[usize],
+    whitener: &Whitener,
+    e0: f64,
+    theta0: f64,
+    max_iterations: usize,
+) -> Option<GlsFit> {
+    let moduli = model.base.moduli_kpa();
+    let (ln_lo, ln_hi) = (moduli[0].ln(), moduli[moduli.len() - 1].ln());
+    let k = if cand.is_some() { 2 } else { 1 };
+    let (t_lo, t_hi) = cand.map_or((0.0, 0.0), |c| {
+        let (_, lo, hi) = c.kind.parameter();
+        (lo, hi)
+    });
+    let n_all = points.len();
+    let residual = |q: &[f64]| -> Option<(Vec<f64>, Vec<f64>)> {
+        let e = q[0].exp();
+        let th = if k == 2 { q[1] } else { 0.0 };
+        let mut r = vec![0.0; n_all];
+        for &i in subset {
+            let a = predict_a(model, cand, e, th, &points[i]);
+            if !a.is_finite() {
+                return None;
+            }
+            r[i] = points[i].a_mm - a;
+        }
+        let w = whitener.whiten(&r);
+        Some((r, w))
+    };
+    let chi2 = |w: &[f64]| w.iter().map(|v| v * v).sum::<f64>();
+    let mut q = vec![e0.ln().clamp(ln_lo, ln_hi)];
+    if k == 2 {
+        q.push(theta0.clamp(t_lo, t_hi));
+    }
+    let (mut r, mut w) = residual(&q)?;
+    let mut s = chi2(&w);
+    let mut lambda = 1e-3;
+    let mut iterations = 0;
+    let mut jac: Vec<Vec<f64>> = Vec::new();
+    for it in 0..max_iterations {
+        iterations = it + 1;
+        // Jacobian of the whitened prediction: -(d w / d q)
+        jac.clear();
+        for c in 0..k {
+            let mut h = if c == 0 {
+                1e-3
+            } else {
+                cand.map_or(1e-3, |cd| cd.kind.step())
+            };
+            let mut qp = q.clone();
+            if c == 1 && qp[1] + h > t_hi {
+                h = -h;
+            }
+            if c == 0 && qp[0] + h > ln_hi {
+                h = -h;
+            }
+            qp[c] += h;
+            let (_, wp) = residual(&qp)?;
+            jac.push(w.iter().zip(&wp).map(|(a, b)| (a - b) / h).collect());
+        }
+        let mut jtj = vec![0.0; k * k];
+        let mut jtr = vec![0.0; k];
+        for a in 0..k {
+            jtr[a] = linalg::dot(&jac[a], &w);
+            for b in 0..k {
+                jtj[a * k + b] = linalg::dot(&jac[a], &jac[b]);
+            }
+        }
+        let mut improved = false;
+        for _ in 0..12 {
+            let mut m = jtj.clone();
+            for a in 0..k {
+                m[a * k + a] *= 1.0 + lambda;
+                m[a * k + a] += 1e-12;
+            }
+            let Some(delta) = linalg::solve_spd(&m, k, &jtr) else {
+                lambda *= 10.0;
+                continue;
+            };
+            let mut qn = q.clone();
+            qn[0] = (qn[0] + delta[0]).clamp(ln_lo, ln_hi);
+            if k == 2 {
+                qn[1] = (qn[1] + delta[1]).clamp(t_lo, t_hi);
+            }
+            if let Some((rn, wn)) = residual(&qn) {
+                let sn = chi2(&wn);
+                if sn < s {
+                    let rel = (s - sn) / s.max(1e-300);
+                    q = qn;
+                    r = rn;
+                    w = wn;
+                    s = sn;
+                    lambda = (lambda / 3.0).max(1e-9);
+                    improved = rel > 1e-9;
+                    break;
+                }
+            }
+            lambda *= 4.0;
+        }
+        if !improved {
+            break;
+        }
+    }
+    // covariance from the final Jacobian
+    let mut jtj = vec![0.0; k * k];
+    for a in 0..k {
+        for b in 0..k {
+            jtj[a * k + b] = jac
+                .get(a)
+                .zip(jac.get(b))
+                .map_or(0.0, |(x, y)| linalg::dot(x, y));
+        }
+    }
+    let n = subset.len();
+    let dof = n.saturating_sub(k).max(1) as f64;
+    let scale = (s / dof).max(1.0);
+    let cov = linalg::inverse_spd(&jtj, k).unwrap_or_else(|| vec![f64::INFINITY; k * k]);
+    let se_ln = (cov[0] * scale).sqrt();
+    let theta_se = if k == 2 { (cov[3] * scale).sqrt() } else { 0.0 };
+    let rms = (subset.iter().map(|&i| r[i] * r[i]).sum::<f64>() / n.max(1) as f64).sqrt();
+    Some(GlsFit {
+        modulus_kpa: q[0].exp(),
+        ci95_kpa: [(q[0] - 1.96 * se_ln).exp(), (q[0] + 1.96 * se_ln).exp()],
+        theta: if k == 2 { q[1] } else { 0.0 },
+        theta_se,
+        chi2: s,
+        points: n,
+        parameters: k,
+        chi2_per_dof: s / dof,
+        rms_residual_mm: rms,
+        residuals_mm: r,
+        whitened: w,
+        iterations,
+    })
+}

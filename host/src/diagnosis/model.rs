@@ -1,0 +1,162 @@
+//! The forward model the diagnosis fits: the baseline table a(E2, p_air, u_s) (PCHIP in
+//! u_s and ln E2, linear in p_air: fem-core's interpolation), continued linearly in p_air
+//! beyond the table's pressures (for the pressure-offset candidate), plus the effect tables'
+//! slices along their effect axes.
+
+use fem_core::lut::{Lut, LutQuery, LutSlice, OutOfRange};
+
+use super::tables::{EffectAxis, EffectTable};
+
+/// Values of the model at one point.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ModelSample {
+    pub a_mm: f64,
+    pub load_n: f64,
+    pub h_mm: f64,
+}
+
+/// One (E2, p_air) slice, clamped into its table.
+#[derive(Debug, Clone)]
+pub struct Surface<'a> {
+    slice: LutSlice<'a>,
+    pressures: Vec<f64>,
+    moduli: Vec<f64>,
+}
+
+impl<'a> Surface<'a> {
+    pub fn new(lut: &'a Lut, sel: &fem_core::lut::EffectSelection) -> Result<Self, String> {
+        Ok(Self {
+            slice: lut.slice(sel).map_err(|e| e.to_string())?,
+            pressures: lut.grid.pressure_kpa.clone(),
+            moduli: lut.grid.modulus_kpa.clone(),
+        })
+    }
+
+    pub fn moduli_kpa(&self) -> &[f64] {
+        &self.moduli
+    }
+
+    fn at(&self, e: f64, p: f64, u: f64) -> ModelSample {
+        match self.slice.sample(
+            &LutQuery {
+                modulus_kpa: e,
+                pressure_kpa: p,
+                u_s_mm: u,
+            },
+            OutOfRange::Clamp,
+        ) {
+            Ok(s) => ModelSample {
+                a_mm: s.a_mm,
+                load_n: s.load_n,
+                h_mm: s.h_mm,
+            },
+            Err(_) => ModelSample {
+                a_mm: f64::NAN,
+                load_n: f64::NAN,
+                h_mm: f64::NAN,
+            },
+        }
+    }
+
+    /// The model at (E2, p_air, u_s); outside the table's pressures it is continued linearly
+    /// from the two nearest pressure nodes (the table's own interpolation is linear in p_air).
+    pub fn sample(&self, e: f64, p: f64, u: f64) -> ModelSample {
+        let n = self.pressures.len();
+        if n >= 2 && (p < self.pressures[0] || p > self.pressures[n - 1]) {
+            let (p0, p1) = if p < self.pressures[0] {
+                (self.pressures[0], self.pressures[1])
+            } else {
+                (self.pressures[n - 2], self.pressures[n - 1])
+            };
+            let (s0, s1) = (self.at(e, p0, u), self.at(e, p1, u));
+            let w = (p - p0) / (p1 - p0);
+            let lerp = |a: f64, b: f64| a + w * (b - a);
+            return ModelSample {
+                a_mm: lerp(s0.a_mm, s1.a_mm),
+                load_n: lerp(s0.load_n, s1.load_n),
+                h_mm: lerp(s0.h_mm, s1.h_mm),
+            };
+        }
+        self.at(e, p, u)
+    }
+
+    /// The u_s range covered at (E2, p_air) (clamped into the table).
+    pub fn u_s_range_mm(&self, e: f64, p: f64) -> Option<(f64, f64)> {
+        let e = e.clamp(self.moduli[0], self.moduli[self.moduli.len() - 1]);
+        let p = p.clamp(self.pressures[0], self.pressures[self.pressures.len() - 1]);
+        self.slice.u_s_range_mm(e, p).ok()
+    }
+}
+
+/// One effect axis: its slices at each axis value (increasing).
+#[derive(Debug, Clone)]
+pub struct AxisSurfaces<'a> {
+    pub axis: EffectAxis,
+    pub values: Vec<f64>,
+    pub surfaces: Vec<Surface<'a>>,
+    pub source: String,
+}
+
+impl AxisSurfaces<'_> {
+    /// a at axis value `v` minus a at the axis' base value (linear between axis nodes).
+    pub fn delta_a(&self, e: f64, p: f64, u: f64, v: f64) -> f64 {
+        let at = |v: f64| -> f64 {
+            let n = self.values.len();
+            let k = match self.values.iter().position(|&x| x >= v) {
+                Some(0) => 0,
+                Some(k) => k - 1,
+                None => n - 2,
+            }
+            .min(n - 2);
+            let (v0, v1) = (self.values[k], self.values[k + 1]);
+            let w = ((v - v0) / (v1 - v0)).clamp(0.0, 1.0);
+            let a0 = self.surfaces[k].sample(e, p, u).a_mm;
+            if w == 0.0 {
+                return a0;
+            }
+            a0 + w * (self.surfaces[k + 1].sample(e, p, u).a_mm - a0)
+        };
+        at(v) - at(self.axis.base_value())
+    }
+}
+
+/// Baseline and effect surfaces.
+#[derive(Debug, Clone)]
+pub struct Model<'a> {
+    pub base: Surface<'a>,
+    pub axes: Vec<AxisSurfaces<'a>>,
+}
+
+impl<'a> Model<'a> {
+    pub fn new(base: &'a Lut, effects: &'a [EffectTable]) -> Result<Self, String> {
+        let base = Surface::new(base, &fem_core::lut::EffectSelection::default())
+            .map_err(|e| format!("baseline table: {e}"))?;
+        let mut axes = Vec::new();
+        for t in effects {
+            let values = t.axis.values_in(&t.lut.grid).to_vec();
+            let surfaces = values
+                .iter()
+                .map(|&v| Surface::new(&t.lut, &t.axis.select(v)))
+                .collect::<Result<Vec<_>, _>>()
+                .map_err(|e| format!("{}: {e}", t.path))?;
+            axes.push(AxisSurfaces {
+                axis: t.axis,
+                values,
+                surfaces,
+                source: t.path.clone(),
+            });
+        }
+        Ok(Self { base, axes })
+    }
+
+    pub fn axis(&self, axis: EffectAxis) -> Option<&AxisSurfaces<'a>> {
+        self.axes.iter().find(|a| a.axis == axis)
+    }
+
+    /// d a / d u_s of the baseline (central difference), for the u_s-offset noise term.
+    pub fn slope_da_du(&self, e: f64, p: f64, u: f64) -> f64 {
+        let h = 0.01;
+        (self.base.sample(e, p, u + h).a_mm - self.base.sample(e, p, (u - h).max(0.0)).a_mm)
+            / (u + h - (u - h).max(0.0))
+    }
+}

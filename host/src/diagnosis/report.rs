@@ -1,0 +1,352 @@
+//! The report of a diagnosis: text for people, the JSON object, and residual plots (SVG,
+//! written directly like the fit's plots: no font or raster libraries) of the residuals
+//! before and after adding the effect with the noise model's +-2 sigma band.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use super::{Diagnosis, PlotData};
+
+/// Human-readable report.
+pub fn text(d: &Diagnosis) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "verdict: {}{}",
+        d.verdict.as_str(),
+        match (&d.effect, d.verdict.as_str()) {
+            (Some(e), "ambiguous") => format!(" — {} or {}", e, d.ambiguity_group.join(" or ")),
+            (Some(e), _) => format!(" — {e}"),
+            _ => String::new(),
+        }
+    );
+    if let Some(c) = d.confidence {
+        let _ = writeln!(
+            s,
+            "confidence: {:.0} % (the selection named it in that share of reruns on data simulated from the augmented fit)",
+            100.0 * c
+        );
+    }
+    if let Some(obj) = d.parameters.as_object() {
+        for (k, v) in obj {
+            let _ = writeln!(s, "  {k} = {v}");
+        }
+    }
+    let _ = writeln!(
+        s,
+        "\nnoise model{}:",
+        if d.noise_model_assumed {
+            " (partly ASSUMED: no replicates)"
+        } else {
+            " (from replicates)"
+        }
+    );
+    for n in &d.noise_model {
+        let _ = writeln!(
+            s,
+            "  {:>5.1} kPa: {} replicate(s), {} points; white {:.4} mm in a + {:.4} mm in u_s; per-test offset {:.4} mm in a + {:.4} mm in u_s; smooth {:.4} mm in a + {:.4} mm in u_s (l = {:.2} mm); table interpolation {:.4} mm rms{}",
+            n.p_air_kpa,
+            n.replicates,
+            n.points,
+            n.white_mm,
+            n.white_u_mm,
+            n.test_offset_a_mm,
+            n.test_offset_u_mm,
+            n.smooth_mm,
+            n.smooth_u_mm,
+            n.smooth_length_mm,
+            n.lut_rms_mm,
+            if n.assumed { " [assumed]" } else { "" }
+        );
+    }
+    let l = &d.localisation;
+    let _ = writeln!(
+        s,
+        "\nbaseline (host fit): E2 = {:.1} kPa ({:.1} .. {:.1}); lack of fit chi2 = {:.1} on {} dof (p = {:.2e}); runs {} vs {:.1} expected (z = {:.2})",
+        d.host_fit.modulus_kpa,
+        d.host_fit.ci95_kpa[0],
+        d.host_fit.ci95_kpa[1],
+        l.lack_of_fit.chi2,
+        l.lack_of_fit.dof,
+        l.lack_of_fit.p_value,
+        l.runs.runs,
+        l.runs.expected,
+        l.runs.z
+    );
+    let _ = writeln!(
+        s,
+        "whitened residuals by channel x pressure x u_s window (* = disagreement):"
+    );
+    for c in &l.cells {
+        let _ = writeln!(
+            s,
+            "  {} {:>5.1} kPa u_s {:.2}..{:.2} mm: n {:>4}, mean {:+.2}, rms {:.2}, z {:+.1}, mean residual {:+.4}{}",
+            c.channel,
+            c.p_air_kpa,
+            c.u_s_range_mm[0],
+            c.u_s_range_mm[1],
+            c.points,
+            c.mean_whitened,
+            c.rms_whitened,
+            c.z,
+            c.mean_residual,
+            if c.flagged { "  *" } else { "" }
+        );
+    }
+    let _ = writeln!(s, "apparent modulus per window:");
+    for m in &l.window_moduli {
+        if let Some(r) = m.u_s_range_mm {
+            let _ = writeln!(
+                s,
+                "  {:>5.1} kPa u_s {:.2}..{:.2} mm: {:.1} kPa ({:.1} .. {:.1})",
+                m.p_air_kpa, r[0], r[1], m.modulus_kpa, m.ci95_kpa[0], m.ci95_kpa[1]
+            );
+        }
+    }
+    for m in &l.pressure_moduli {
+        let _ = writeln!(
+            s,
+            "  {:>5.1} kPa alone: {:.1} kPa ({:.1} .. {:.1})",
+            m.p_air_kpa, m.modulus_kpa, m.ci95_kpa[0], m.ci95_kpa[1]
+        );
+    }
+    if let Some(t) = l.modulus_trend_per_mm {
+        let _ = writeln!(s, "  trend of ln E2 over depth: {t:+.3} per mm of u_s");
+    }
+    let _ = writeln!(
+        s,
+        "\ncandidates (threshold: 95th percentile of the largest null improvement = {:.2}, {} bootstrap draws):",
+        d.threshold.delta_chi2_95, d.threshold.replicates
+    );
+    for c in &d.candidates {
+        let _ = writeln!(
+            s,
+            "  {:<34} screen {:>9.2}  refit {:>9}  AIC {:>10}  BIC {:>10}  held-out {}{}",
+            c.label,
+            c.screen_delta_chi2,
+            c.delta_chi2.map_or("-".into(), |v| format!("{v:.2}")),
+            c.aic.map_or("-".into(), |v| format!("{v:.1}")),
+            c.bic.map_or("-".into(), |v| format!("{v:.1}")),
+            c.held_out.as_ref().map_or("-".into(), |h| format!(
+                "{:.1} vs baseline {:.1}{}",
+                h.candidate_chi2,
+                h.baseline_chi2,
+                if h.confirms {
+                    " (confirms)"
+                } else {
+                    " (does not confirm)"
+                }
+            )),
+            c.fit.as_ref().map_or(String::new(), |f| format!(
+                "  theta {:.4} +- {:.4}",
+                f.theta, f.theta_se
+            )),
+        );
+    }
+    if !d.ambiguity_pairs.is_empty() {
+        let _ = writeln!(
+            s,
+            "indistinguishable in this experiment (|cos| of signatures):"
+        );
+        for p in &d.ambiguity_pairs {
+            let _ = writeln!(s, "  {} ~ {} ({:.3})", p.a, p.b, p.cos);
+        }
+    }
+    if d.verdict.as_str() == "none" {
+        let _ = writeln!(s, "minimum detectable sizes (80 % power at the threshold):");
+        for m in &d.minimum_detectable {
+            let _ = writeln!(s, "  {:<20} {} = {:.4}", m.effect, m.parameter, m.size);
+        }
+    }
+    let _ = writeln!(s, "\ngap before and after:");
+    let mut rows = vec![&d.baseline];
+    if let Some(a) = &d.augmented {
+        rows.push(a);
+    }
+    for g in rows {
+        let _ = writeln!(
+            s,
+            "  {:<34} E2 = {:>7.1} kPa ({:.1} .. {:.1})  chi2/dof {:>8.3}  RMS {:.4} mm  worst |w| {:.2}  held-out chi2/point {}",
+            g.model,
+            g.modulus_kpa,
+            g.ci95_kpa[0],
+            g.ci95_kpa[1],
+            g.chi2_per_dof,
+            g.rms_residual_mm,
+            g.worst_whitened,
+            g.held_out_chi2_per_point
+                .map_or("-".into(), |v| format!("{v:.3}"))
+        );
+    }
+    if let Some(gs) = d.gap_shrink {
+        let _ = writeln!(s, "  gap shrink (chi2/dof before / after): {gs:.2}");
+    }
+    let _ = writeln!(
+        s,
+        "\n{} points used, {} outside the table's u_s range; {:.2} s",
+        d.points_used, d.points_excluded, d.seconds
+    );
+    for n in &d.notes {
+        let _ = writeln!(s, "note: {n}");
+    }
+    s
+}
+
+/// JSON object of the diagnosis.
+pub fn json(d: &Diagnosis) -> serde_json::Value {
+    serde_json::to_value(d).unwrap_or(serde_json::Value::Null)
+}
+
+const W: f64 = 720.0;
+const PANEL_H: f64 = 300.0;
+const M: f64 = 60.0;
+
+/// Residuals against u_s at each pressure, before (grey) and after (blue) adding the effect,
+/// with the noise model's +-2 sigma band (marginal standard deviation per point).
+pub fn residual_svg(plot: &PlotData) -> String {
+    let ps = super::data::pressures(&plot.points);
+    let h_total = PANEL_H * ps.len().max(1) as f64;
+    let mut svg = format!(
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{W}" height="{h_total}" font-family="sans-serif">"#
+    );
+    for (k, &p) in ps.iter().enumerate() {
+        let y0 = k as f64 * PANEL_H;
+        let idx: Vec<usize> = plot
+            .subset
+            .iter()
+            .copied()
+            .filter(|&i| plot.points[i].p_air_kpa == p)
+            .collect();
+        if idx.is_empty() {
+            continue;
+        }
+        let umin = idx
+            .iter()
+            .map(|&i| plot.points[i].u_s_mm)
+            .fold(f64::INFINITY, f64::min);
+        let umax = idx
+            .iter()
+            .map(|&i| plot.points[i].u_s_mm)
+            .fold(f64::NEG_INFINITY, f64::max);
+        let mut ymax = idx
+            .iter()
+            .map(|&i| {
+                let after = plot.after_mm.as_ref().map_or(0.0, |a| a[i].abs());
+                plot.before_mm[i]
+                    .abs()
+                    .max(after)
+                    .max(2.0 * plot.sigma_mm[i])
+            })
+            .fold(0.0, f64::max);
+        ymax = (ymax * 1.1).max(1e-4);
+        let px = |u: f64| M + (u - umin) / (umax - umin).max(1e-9) * (W - 1.5 * M);
+        let py = |r: f64| y0 + PANEL_H / 2.0 - r / ymax * (PANEL_H / 2.0 - 0.6 * M);
+        let _ = write!(
+            svg,
+            r##"<rect x="{M}" y="{:.1}" width="{:.1}" height="{:.1}" fill="none" stroke="#444"/>"##,
+            y0 + 0.6 * M,
+            W - 1.5 * M,
+            PANEL_H - 1.2 * M
+        );
+        let _ = write!(
+            svg,
+            r#"<text x="{:.1}" y="{:.1}" font-size="14" text-anchor="middle">residual a (mm) vs u_s (mm) at {p} kPa; grey: baseline, blue: {}; band: +-2 sigma</text>"#,
+            W / 2.0,
+            y0 + 0.4 * M,
+            if plot.after_mm.is_some() {
+                plot.after_label.as_str()
+            } else {
+                "(no effect added)"
+            }
+        );
+        for (v, label) in [
+            (ymax, format!("{ymax:.3}")),
+            (0.0, "0".into()),
+            (-ymax, format!("{:.3}", -ymax)),
+        ] {
+            let _ = write!(
+                svg,
+                r#"<text x="{:.1}" y="{:.1}" font-size="11" text-anchor="end">{label}</text>"#,
+                M - 4.0,
+                py(v) + 4.0
+            );
+        }
+        for (u, label) in [(umin, format!("{umin:.2}")), (umax, format!("{umax:.2}"))] {
+            let _ = write!(
+                svg,
+                r#"<text x="{:.1}" y="{:.1}" font-size="11" text-anchor="middle">{label}</text>"#,
+                px(u),
+                y0 + PANEL_H - 0.3 * M
+            );
+        }
+        // band: +-2 sigma along u_s (points sorted by u_s)
+        let mut by_u = idx.clone();
+        by_u.sort_by(|&a, &b| plot.points[a].u_s_mm.total_cmp(&plot.points[b].u_s_mm));
+        let upper: Vec<String> = by_u
+            .iter()
+            .map(|&i| {
+                format!(
+                    "{:.1},{:.1}",
+                    px(plot.points[i].u_s_mm),
+                    py(2.0 * plot.sigma_mm[i])
+                )
+            })
+            .collect();
+        let lower: Vec<String> = by_u
+            .iter()
+            .rev()
+            .map(|&i| {
+                format!(
+                    "{:.1},{:.1}",
+                    px(plot.points[i].u_s_mm),
+                    py(-2.0 * plot.sigma_mm[i])
+                )
+            })
+            .collect();
+        let _ = write!(
+            svg,
+            r##"<polygon points="{} {}" fill="#f4d58d" fill-opacity="0.5" stroke="none"/>"##,
+            upper.join(" "),
+            lower.join(" ")
+        );
+        let _ = write!(
+            svg,
+            r##"<line x1="{M}" y1="{:.1}" x2="{:.1}" y2="{:.1}" stroke="#888"/>"##,
+            py(0.0),
+            W - 0.5 * M,
+            py(0.0)
+        );
+        for &i in &idx {
+            let _ = write!(
+                svg,
+                r##"<circle cx="{:.1}" cy="{:.1}" r="1.6" fill="#999"/>"##,
+                px(plot.points[i].u_s_mm),
+                py(plot.before_mm[i])
+            );
+        }
+        if let Some(after) = &plot.after_mm {
+            for &i in &idx {
+                let _ = write!(
+                    svg,
+                    r##"<circle cx="{:.1}" cy="{:.1}" r="1.6" fill="#1f5fbf"/>"##,
+                    px(plot.points[i].u_s_mm),
+                    py(after[i])
+                );
+            }
+        }
+    }
+    svg.push_str("</svg>\n");
+    svg
+}
+
+/// Writes report.txt, diagnosis.json and residuals.svg into `dir`.
+pub fn write_outputs(d: &Diagnosis, dir: &Path) -> std::io::Result<()> {
+    std::fs::create_dir_all(dir)?;
+    std::fs::write(dir.join("report.txt"), text(d))?;
+    std::fs::write(
+        dir.join("diagnosis.json"),
+        serde_json::to_string_pretty(&json(d)).unwrap_or_default(),
+    )?;
+    std::fs::write(dir.join("residuals.svg"), residual_svg(&d.plot))?;
+    Ok(())
+}

@@ -1,0 +1,265 @@
+//! Selection among candidates.
+//!
+//! 1. Screen: the linearised score of every candidate at the baseline fit
+//!    ([`super::signatures`]); the best few are refitted fully (GLS, modulus and parameter).
+//! 2. Threshold: parametric bootstrap of the baseline. Under the baseline model the whitened
+//!    residuals are N(0, I); after the modulus refit each candidate's improvement is its
+//!    score on them, so the null distribution of the largest improvement any candidate gets
+//!    is simulated from B draws z ~ N(0, I) and its 95th percentile is the threshold
+//!    (Efron & Tibshirani 1993, ch. 6: parametric bootstrap; the max over candidates takes
+//!    the multiple comparisons into account).
+//! 3. Held-out check: the candidate must predict data it was not fitted to better than the
+//!    baseline: fit on one pressure and predict the other (both ways), or with one pressure
+//!    fit the shallow half of u_s and predict the deep half (and back).
+//! 4. Information criteria alongside: AIC = chi^2 + 2k (Akaike 1974), BIC = chi^2 + k ln n
+//!    (Schwarz 1978), chi^2 being -2 log-likelihood up to a constant under the noise model.
+
+use serde::Serialize;
+
+use super::candidates::Candidate;
+use super::data::Point;
+use super::fitting::{GlsFit, fit};
+use super::model::Model;
+use super::noise_model::NoiseModel;
+use super::signatures::Signature;
+use super::stats::{Gauss, quantile};
+
+/// Bootstrap result.
+#[derive(Debug, Clone, Serialize)]
+pub struct Threshold {
+    pub replicates: usize,
+    /// 95th percentile of the largest null improvement.
+    pub delta_chi2_95: f64,
+    pub delta_chi2_99: f64,
+}
+
+/// Null distribution of max_k score_k from `b` whitened noise draws.
+pub fn bootstrap_threshold(sigs: &[Signature], n: usize, b: usize, seed: u64) -> Threshold {
+    let mut g = Gauss::new(seed);
+    let mut maxima = Vec::with_capacity(b);
+    let mut z = vec![0.0; n];
+    for _ in 0..b {
+        for v in z.iter_mut() {
+            *v = g.normal();
+        }
+        let m = sigs.iter().map(|s| s.score(&z)).fold(0.0, f64::max);
+        maxima.push(m);
+    }
+    Threshold {
+        replicates: b,
+        delta_chi2_95: quantile(&maxima, 0.95),
+        delta_chi2_99: quantile(&maxima, 0.99),
+    }
+}
+
+/// Held-out comparison: whitened chi^2 of the predictions on the held-out parts.
+#[derive(Debug, Clone, Serialize)]
+pub struct HeldOut {
+    pub scheme: String,
+    pub baseline_chi2: f64,
+    pub candidate_chi2: f64,
+    pub points: usize,
+    pub confirms: bool,
+}
+
+/// The splits of the held-out check: (fit on, predict) pairs of point index sets.
+pub fn splits(points: &[Point], subset: &[usize]) -> (String, Vec<(Vec<usize>, Vec<usize>)>) {
+    let ps = super::data::pressures(points);
+    let used_ps: Vec<f64> = ps
+        .into_iter()
+        .filter(|p| subset.iter().any(|&i| points[i].p_air_kpa == *p))
+        .collect();
+    if used_ps.len() >= 2 {
+        let out = used_ps
+            .iter()
+            .map(|&p| {
+                let a: Vec<usize> = subset
+                    .iter()
+                    .copied()
+                    .filter(|&i| points[i].p_air_kpa == p)
+                    .collect();
+                let b: Vec<usize> = subset
+                    .iter()
+                    .copied()
+                    .filter(|&i| points[i].p_air_kpa != p)
+                    .collect();
+                (a, b)
+            })
+            .collect();
+        return ("fit one pressure, predict the other(s)".into(), out);
+    }
+    let mut us: Vec<f64> = subset.iter().map(|&i| points[i].u_s_mm).collect();
+    us.sort_by(f64::total_cmp);
+    let med = us.get(us.len() / 2).copied().unwrap_or(0.0);
+    let shallow: Vec<usize> = subset
+        .iter()
+        .copied()
+        .filter(|&i| points[i].u_s_mm < med)
+        .collect();
+    let deep: Vec<usize> = subset
+        .iter()
+        .copied()
+        .filter(|&i| points[i].u_s_mm >= med)
+        .collect();
+    (
+        "fit shallow half of u_s, predict the deep half (and back)".into(),
+        vec![(shallow.clone(), deep.clone()), (deep, shallow)],
+    )
+}
+
+/// Whitened chi^2 of `points[predict]` under a fit's parameters.
+fn predict_chi2(
+    model: &Model<'_>,
+    cand: Option<&Candidate>,
+    points: &[Point],
+    predict: &[usize],
+    noise: &NoiseModel,
+    e: f64,
+    theta: f64,
+) -> Option<f64> {
+    let w = noise.whitener(points, predict)?;
+    let mut r = vec![0.0; points.len()];
+    for &i in predict {
+        r[i] = points[i].a_mm - super::candidates::predict_a(model, cand, e, theta, &points[i]);
+    }
+    Some(w.whiten(&r).iter().map(|v| v * v).sum())
+}
+
+/// Held-out check of `cand` against the baseline.
+pub fn held_out(
+    model: &Model<'_>,
+    cand: &Candidate,
+    points: &[Point],
+    subset: &[usize],
+    noise: &NoiseModel,
+    e0: f64,
+    theta0: f64,
+) -> Option<HeldOut> {
+    let (scheme, sp) = splits(points, subset);
+    let (mut base, mut candc, mut n) = (0.0, 0.0, 0);
+    for (a, b) in &sp {
+        if a.len() < 4 || b.len() < 4 {
+            continue;
+        }
+        let wa = noise.whitener(points, a)?;
+        let fb = fit(model, None, points, a, &wa, e0, 0.0, 30)?;
+        let fc = fit(model, Some(cand), points, a, &wa, e0, theta0, 30)?;
+        base += predict_chi2(model, None, points, b, noise, fb.modulus_kpa, 0.0)?;
+        candc += predict_chi2(
+            model,
+            Some(cand),
+            points,
+            b,
+            noise,
+            fc.modulus_kpa,
+            fc.theta,
+        )?;
+        n += b.len();
+    }
+    if n == 0 {
+        return None;
+    }
+    Some(HeldOut {
+        scheme,
+        baseline_chi2: base,
+        candidate_chi2: candc,
+        points: n,
+        confirms: candc < base,
+    })
+}
+
+/// One screened candidate.
+#[derive(Debug, Clone, Serialize)]
+pub struct Screened {
+    pub effect: String,
+    pub label: String,
+    #[serde(skip)]
+    pub candidate: Candidate,
+    /// Linearised improvement at the baseline.
+    pub screen_delta_chi2: f64,
+    /// Full refit (the best few only).
+    pub fit: Option<GlsFit>,
+    pub delta_chi2: Option<f64>,
+    pub aic: Option<f64>,
+    pub bic: Option<f64>,
+    pub held_out: Option<HeldOut>,
+    pub passes_threshold: bool,
+}
+
+/// Screens every candidate and fully refits the best `refit` (always including the best
+/// variant of each effect among them).
+#[allow(clippy::too_many_arguments)]
+pub fn screen_and_refit(
+    model: &Model<'_>,
+    sigs: &[Signature],
+    points: &[Point],
+    subset: &[usize],
+    whitener: &super::noise_model::Whitener,
+    base: &GlsFit,
+    threshold: f64,
+    refit: usize,
+) -> Vec<Screened> {
+    let mut out: Vec<Screened> = sigs
+        .iter()
+        .map(|s| Screened {
+            effect: s.candidate.kind.name().to_string(),
+            label: s.candidate.label(),
+            candidate: s.candidate,
+            screen_delta_chi2: s.score(&base.whitened),
+            fit: None,
+            delta_chi2: None,
+            aic: None,
+            bic: None,
+            held_out: None,
+            passes_threshold: false,
+        })
+        .collect();
+    out.sort_by(|a, b| b.screen_delta_chi2.total_cmp(&a.screen_delta_chi2));
+    let n = subset.len() as f64;
+    let mut refitted_kinds = Vec::new();
+    for s in out.iter_mut() {
+        if refitted_kinds.len() >= refit {
+            break;
+        }
+        if refitted_kinds.contains(&s.candidate.kind) && s.candidate.tau_h_mm.is_none() {
+            continue;
+        }
+        let sig = sigs.iter().find(|g| g.candidate == s.candidate);
+        let theta0 = sig.map_or(0.0, |g| g.theta_estimate(&base.whitened));
+        // start from the linearised estimate and from a small step, keep the better
+        let mut best: Option<GlsFit> = None;
+        for t0 in [theta0, s.candidate.kind.step() * 5.0] {
+            if let Some(f) = fit(
+                model,
+                Some(&s.candidate),
+                points,
+                subset,
+                whitener,
+                base.modulus_kpa,
+                t0,
+                40,
+            ) && best.as_ref().is_none_or(|b| f.chi2 < b.chi2)
+            {
+                best = Some(f);
+            }
+        }
+        if let Some(f) = best {
+            let d = base.chi2 - f.chi2;
+            s.delta_chi2 = Some(d);
+            s.aic = Some(f.chi2 + 2.0 * f.parameters as f64);
+            s.bic = Some(f.chi2 + f.parameters as f64 * n.ln());
+            s.passes_threshold = d > threshold;
+            s.fit = Some(f);
+        }
+        if !refitted_kinds.contains(&s.candidate.kind) {
+            refitted_kinds.push(s.candidate.kind);
+        }
+    }
+    out.sort_by(|a, b| {
+        b.delta_chi2
+            .unwrap_or(f64::NEG_INFINITY)
+            .total_cmp(&a.delta_chi2.unwrap_or(f64::NEG_INFINITY))
+            .then(b.screen_delta_chi2.total_cmp(&a.screen_delta_chi2))
+    });
+    out
+}

@@ -1,0 +1,161 @@
+//! Residual signatures: what each candidate adds to the residuals per unit of its parameter,
+//! in whitened units, with the part a refit of the modulus absorbs projected out:
+//! g_perp = g - j (j.g)/(j.j), g = L^-1 d f/d theta, j = L^-1 d f/d ln E2 (the
+//! linearised least-squares geometry, e.g. Seber & Wild 1989 ch. 2). The score statistic of
+//! a candidate on whitened residuals w is (g_perp.w)^2 / |g_perp|^2 (one-sided effects count
+//! only the sign they can produce); two candidates whose signatures have |cos| above
+//! [`AMBIGUITY_COS`] cannot be told apart by this experiment and form an ambiguity group.
+
+use serde::Serialize;
+
+use super::candidates::{Candidate, predict_a};
+use super::data::Point;
+use super::linalg::dot;
+use super::model::Model;
+use super::noise_model::Whitener;
+
+/// Signatures more aligned than this (|cos|) are reported as indistinguishable.
+pub const AMBIGUITY_COS: f64 = 0.95;
+
+/// One candidate's signature at the baseline fit.
+#[derive(Debug, Clone)]
+pub struct Signature {
+    pub candidate: Candidate,
+    /// Whitened, per unit parameter, orthogonal to the modulus direction.
+    pub g_perp: Vec<f64>,
+    pub norm: f64,
+    /// Only positive parameters are allowed.
+    pub one_sided: bool,
+}
+
+impl Signature {
+    /// Linearised chi^2 improvement of this candidate on whitened residuals `w`.
+    pub fn score(&self, w: &[f64]) -> f64 {
+        if self.norm <= 0.0 {
+            return 0.0;
+        }
+        let proj = dot(&self.g_perp, w) / self.norm;
+        if self.one_sided && proj < 0.0 {
+            0.0
+        } else {
+            proj * proj
+        }
+    }
+
+    /// Linearised parameter estimate from whitened residuals `w`.
+    pub fn theta_estimate(&self, w: &[f64]) -> f64 {
+        if self.norm <= 0.0 {
+            return 0.0;
+        }
+        let t = dot(&self.g_perp, w) / (self.norm * self.norm);
+        if self.one_sided { t.max(0.0) } else { t }
+    }
+}
+
+/// Whitened derivative of the prediction along a parameter (forward difference).
+fn whitened_derivative(
+    points: &[Point],
+    subset: &[usize],
+    whitener: &Whitener,
+    f0: &[f64],
+    eval: impl Fn(&Point) -> f64,
+    step: f64,
+) -> Vec<f64> {
+    let mut d = vec![0.0; points.len()];
+    for &i in subset {
+        d[i] = (eval(&points[i]) - f0[i]) / step;
+    }
+    whitener.whiten(&d)
+}
+
+/// Modulus direction j and each candidate's signature at baseline modulus `e`.
+pub fn signatures(
+    model: &Model<'_>,
+    candidates: &[Candidate],
+    points: &[Point],
+    subset: &[usize],
+    whitener: &Whitener,
+    e: f64,
+) -> (Vec<f64>, Vec<Signature>) {
+    let mut f0 = vec![0.0; points.len()];
+    for &i in subset {
+        f0[i] = predict_a(model, None, e, 0.0, &points[i]);
+    }
+    let h = 1e-3;
+    let j = whitened_derivative(
+        points,
+        subset,
+        whitener,
+        &f0,
+        |p| predict_a(model, None, e * h.exp(), 0.0, p),
+        h,
+    );
+    let jj = dot(&j, &j).max(1e-300);
+    let sigs = candidates
+        .iter()
+        .map(|c| {
+            let step = c.kind.step();
+            let g = whitened_derivative(
+                points,
+                subset,
+                whitener,
+                &f0,
+                |p| predict_a(model, Some(c), e, step, p),
+                step,
+            );
+            let k = dot(&j, &g) / jj;
+            let g_perp: Vec<f64> = g.iter().zip(&j).map(|(a, b)| a - k * b).collect();
+            let norm = dot(&g_perp, &g_perp).sqrt();
+            Signature {
+                candidate: *c,
+                g_perp,
+                norm,
+                one_sided: c.kind.parameter().1 >= 0.0,
+            }
+        })
+        .collect();
+    (j, sigs)
+}
+
+/// |cos| between two signatures.
+pub fn similarity(a: &Signature, b: &Signature) -> f64 {
+    if a.norm <= 0.0 || b.norm <= 0.0 {
+        return 0.0;
+    }
+    (dot(&a.g_perp, &b.g_perp) / (a.norm * b.norm)).abs()
+}
+
+/// A pair of candidates this experiment cannot tell apart.
+#[derive(Debug, Clone, Serialize)]
+pub struct AmbiguousPair {
+    pub a: String,
+    pub b: String,
+    pub cos: f64,
+}
+
+/// Pairs of different effects with |cos| >= [`AMBIGUITY_COS`] (for the viscoelastic variants,
+/// the most similar one).
+pub fn ambiguous_pairs(sigs: &[Signature]) -> Vec<AmbiguousPair> {
+    let mut out: Vec<AmbiguousPair> = Vec::new();
+    for (i, a) in sigs.iter().enumerate() {
+        for b in &sigs[i + 1..] {
+            if a.candidate.kind == b.candidate.kind {
+                continue;
+            }
+            let c = similarity(a, b);
+            if c < AMBIGUITY_COS {
+                continue;
+            }
+            let (na, nb) = (a.candidate.kind.name(), b.candidate.kind.name());
+            match out.iter_mut().find(|p| p.a == na && p.b == nb) {
+                Some(p) => p.cos = p.cos.max(c),
+                None => out.push(AmbiguousPair {
+                    a: na.to_string(),
+                    b: nb.to_string(),
+                    cos: c,
+                }),
+            }
+        }
+    }
+    out
+}
