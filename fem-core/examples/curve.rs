@@ -46,5 +46,21 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
     }
     println!("solve time {:.3} s", curve.solve_seconds);
+    if std::env::var_os("FEM_STATS").is_some() {
+        // stage-2 model diagnostics (one more solve of the same curve)
+        let settings = fem_core::SolverSettings::for_level(params.mesh_level);
+        let (_, ind, _) = fem_core::problem::solve_curve_state(&params, &settings)?;
+        let m = &ind.model;
+        println!(
+            "stage 2: {} equations, {} Newton iterations, assembly {:.3} s, linear solves \
+             {:.3} s, {} symbolic analyses, (LDLT, LU) fallbacks {:?}",
+            m.n_equations(),
+            m.newton_iterations,
+            m.assembly_seconds,
+            m.solve_seconds,
+            m.solver_symbolic_analyses(),
+            m.solver_fallbacks()
+        );
+    }
     Ok(())
 }

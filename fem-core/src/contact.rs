@@ -522,6 +522,44 @@ impl ContactPair {
         terms
     }
 
+    /// Node pairs that contact terms may couple while the bodies slide by up to
+    /// `window_mm` relative to their reference positions: every slave within `window_mm`
+    /// of the master surface's radial extent with the nodes of every segment that has a
+    /// node within `window_mm` of the slave's reference radius, and the nodes of each
+    /// segment among themselves.
+    /// Reserving them in the sparsity pattern up front spares a symbolic factorisation
+    /// each time the contact zone reaches a new segment.
+    pub fn candidate_node_pairs(&self, nodes: &[[f64; 2]], window_mm: f64) -> Vec<(usize, usize)> {
+        let master_extent = self
+            .masters
+            .iter()
+            .map(|&m| nodes[m][0])
+            .fold(0.0, f64::max);
+        let mut pairs = Vec::new();
+        for &slave in &self.slaves {
+            let r = nodes[slave][0];
+            if r > master_extent + window_mm {
+                continue;
+            }
+            for seg in &self.segments {
+                if seg
+                    .nodes
+                    .iter()
+                    .any(|&n| (nodes[n][0] - r).abs() <= window_mm)
+                {
+                    pairs.extend(seg.nodes.iter().map(|&n| (slave, n)));
+                }
+            }
+        }
+        // a segment's control points span neighbouring master elements: its nodes couple
+        for seg in &self.segments {
+            for &a in &seg.nodes {
+                pairs.extend(seg.nodes.iter().map(|&b| (a, b)));
+            }
+        }
+        pairs
+    }
+
     /// Signed gap of every slave node (None where it projects on no segment).
     pub fn slave_gaps(&self, position: &dyn Fn(usize) -> [f64; 2]) -> Vec<Option<f64>> {
         self.slaves

@@ -2,19 +2,29 @@
 //!
 //! The tangent (elements, conservative follower pressure, frictionless contact) is the
 //! Hessian of a potential, hence symmetric: only its upper triangle is assembled and factored
-//! with faer's supernodal sparse Cholesky (LL^T). The symbolic structure and the AMD
-//! ordering are cached and reused as long as the list of assembled index pairs is unchanged
-//! (it only changes when the contact pairing changes). If the Cholesky factorisation fails
-//! (a tangent that is not positive definite, e.g. near a limit point), the full symmetric
-//! matrix is factored with sparse LU instead.
+//! with faer's supernodal sparse Cholesky (LL^T; forced, faer's heuristic would pick the
+//! ~1.4x slower simplicial variant here). The symbolic structure and the AMD ordering are
+//! cached and reused as long as the assembled entries fit the pattern; the pattern is the
+//! union of every pattern seen plus reserved entries (the couplings contact may create, see
+//! [`SymmetricSolver::reserve`]), so one analysis usually serves a whole curve. If the
+//! Cholesky factorisation fails (a tangent that is not positive definite: far from
+//! equilibrium, or near a limit point), LDL^T without pivoting is tried on the same
+//! structure, and only if that meets a zero pivot the full matrix is factored with sparse LU
+//! (its structure cached too).
 
 // Index loops mirror the tensor-index equations of the numerical kernels.
 #![allow(clippy::needless_range_loop)]
 
+use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::solvers::Solve;
-use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
-use faer::sparse::{Pair, SparseColMat, SymbolicSparseColMat, Triplet};
-use faer::{Mat, Side};
+use faer::sparse::linalg::SupernodalThreshold;
+use faer::sparse::linalg::cholesky::{
+    CholeskySymbolicParams, LdltRef, LltRef, SymbolicCholesky, SymmetricOrdering,
+    factorize_symbolic_cholesky,
+};
+use faer::sparse::linalg::solvers::{Lu, SymbolicLu};
+use faer::sparse::{Argsort, Pair, SparseColMat, SymbolicSparseColMat};
+use faer::{Conj, Mat, Par, Side};
 
 use crate::FemError;
 
@@ -45,7 +55,18 @@ impl UpperTriplets {
 
 struct CachedStructure {
     symbolic: SymbolicSparseColMat<usize>,
-    llt: SymbolicLlt<usize>,
+    llt: SymbolicCholesky<usize>,
+    /// Numeric factor values (reused between factorisations).
+    factor: Vec<f64>,
+    /// Work space of the numeric factorisation and the triangular solves.
+    work: MemBuffer,
+    /// Full (both triangles) pattern and symbolic LU for the indefinite fallback, built on
+    /// first use: (pattern, argsort of the expanded upper entries, symbolic LU).
+    full: Option<(
+        SymbolicSparseColMat<usize>,
+        Argsort<usize>,
+        SymbolicLu<usize>,
+    )>,
 }
 
 /// Solver for K x = b with symbolic-factorisation reuse.
@@ -54,6 +75,12 @@ pub struct SymmetricSolver {
     cache: Option<CachedStructure>,
     /// Number of symbolic analyses performed (diagnostic).
     pub symbolic_analyses: usize,
+    /// Number of factorisations that fell back to LDL^T (tangent not positive definite).
+    pub ldlt_fallbacks: usize,
+    /// Number of factorisations that fell back further to LU (LDL^T hit a zero pivot).
+    pub lu_fallbacks: usize,
+    /// Upper-triangle index pairs always included in the pattern (see [`Self::reserve`]).
+    reserved: Vec<Pair<usize, usize>>,
 }
 
 impl std::fmt::Debug for SymmetricSolver {
@@ -85,6 +112,20 @@ fn fill_values(symbolic: &SymbolicSparseColMat<usize>, t: &UpperTriplets) -> Opt
 }
 
 impl SymmetricSolver {
+    /// Include the (i, j) entries in every sparsity pattern analysed from now on, e.g. the
+    /// couplings contact may create later: the symbolic factorisation is then not repeated
+    /// when they appear (a few more stored entries instead).
+    pub fn reserve(&mut self, entries: impl IntoIterator<Item = (usize, usize)>) {
+        self.reserved.extend(entries.into_iter().map(|(i, j)| {
+            if i <= j {
+                Pair::new(i, j)
+            } else {
+                Pair::new(j, i)
+            }
+        }));
+        self.cache = None;
+    }
+
     /// Solve `K x = rhs` for the symmetric matrix of dimension `n` given by `t`.
     ///
     /// The sparsity pattern only grows: when new entries appear (new contact pairs), the
@@ -108,6 +149,7 @@ impl SymmetricSolver {
                 .zip(&t.cols)
                 .map(|(&r, &c)| Pair::new(r as usize, c as usize))
                 .collect();
+            pairs.extend(self.reserved.iter().filter(|p| p.col < n).copied());
             if let Some(old) = self.cache.as_ref().filter(|c| c.symbolic.nrows() == n) {
                 let col_ptr = old.symbolic.col_ptr();
                 let row_idx = old.symbolic.row_idx();
@@ -119,35 +161,132 @@ impl SymmetricSolver {
             }
             let (symbolic, _) = SymbolicSparseColMat::try_new_from_indices(n, n, &pairs)
                 .map_err(|e| solver_error("sparsity pattern", e))?;
-            let llt = SymbolicLlt::try_new(symbolic.as_ref(), Side::Upper)
-                .map_err(|e| solver_error("symbolic Cholesky", e))?;
+            // AMD ordering; the supernodal factorisation (dense blocks) is forced: faer's
+            // automatic choice picks the simplicial one for these 2-D meshes, measured ~2x
+            // slower in the numeric factorisation here
+            let llt = factorize_symbolic_cholesky(
+                symbolic.as_ref(),
+                Side::Upper,
+                SymmetricOrdering::Amd,
+                CholeskySymbolicParams {
+                    supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
+                    ..Default::default()
+                },
+            )
+            .map_err(|e| solver_error("symbolic Cholesky", e))?;
             self.symbolic_analyses += 1;
             values = fill_values(&symbolic, t);
-            self.cache = Some(CachedStructure { symbolic, llt });
+            let req = StackReq::any_of(&[
+                llt.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()),
+                llt.factorize_numeric_ldlt_scratch::<f64>(Par::Seq, Default::default()),
+                llt.solve_in_place_scratch::<f64>(1, Par::Seq),
+            ]);
+            let work = MemBuffer::try_new(req).map_err(|e| solver_error("work space", e))?;
+            let factor = vec![0.0; llt.len_val()];
+            self.cache = Some(CachedStructure {
+                symbolic,
+                llt,
+                factor,
+                work,
+                full: None,
+            });
         }
         let cache = self
             .cache
-            .as_ref()
+            .as_mut()
             .ok_or_else(|| FemError::LinearSolver("no cached structure".into()))?;
         let values = values.ok_or_else(|| FemError::LinearSolver("pattern mismatch".into()))?;
         let matrix = SparseColMat::new(cache.symbolic.clone(), values);
         let mut x = Mat::<f64>::from_fn(n, 1, |i, _| rhs[i]);
-        match Llt::try_new_with_symbolic(cache.llt.clone(), matrix.as_ref(), Side::Upper) {
-            Ok(llt) => llt.solve_in_place(x.as_mut()),
-            Err(_) => {
-                // not positive definite: LU of the full symmetric matrix
-                let mut full = Vec::with_capacity(2 * t.values.len());
-                for ((&r, &c), &v) in t.rows.iter().zip(&t.cols).zip(&t.values) {
-                    full.push(Triplet::new(r as usize, c as usize, v));
-                    if r != c {
-                        full.push(Triplet::new(c as usize, r as usize, v));
+        let stack = MemStack::new(&mut cache.work);
+        let factored = cache.llt.factorize_numeric_llt(
+            &mut cache.factor,
+            matrix.as_ref(),
+            Side::Upper,
+            Default::default(),
+            Par::Seq,
+            stack,
+            Default::default(),
+        );
+        let mut solved = false;
+        if factored.is_ok() {
+            let stack = MemStack::new(&mut cache.work);
+            LltRef::new(&cache.llt, &cache.factor).solve_in_place_with_conj(
+                Conj::No,
+                x.as_mut(),
+                Par::Seq,
+                stack,
+            );
+            solved = true;
+        } else {
+            // not positive definite (far from equilibrium, or past a limit point): LDL^T
+            // without pivoting on the same structure; it fails only on a zero pivot
+            self.ldlt_fallbacks += 1;
+            let stack = MemStack::new(&mut cache.work);
+            let ldlt = cache.llt.factorize_numeric_ldlt(
+                &mut cache.factor,
+                matrix.as_ref(),
+                Side::Upper,
+                Default::default(),
+                Par::Seq,
+                stack,
+                Default::default(),
+            );
+            if ldlt.is_ok() {
+                let stack = MemStack::new(&mut cache.work);
+                LdltRef::new(&cache.llt, &cache.factor).solve_in_place_with_conj(
+                    Conj::No,
+                    x.as_mut(),
+                    Par::Seq,
+                    stack,
+                );
+                solved = (0..n).all(|i| x[(i, 0)].is_finite());
+                if !solved {
+                    x = Mat::<f64>::from_fn(n, 1, |i, _| rhs[i]);
+                }
+            }
+        }
+        if !solved {
+            // not positive definite: LU of the full symmetric matrix, with the expanded
+            // pattern and its symbolic LU cached alongside the Cholesky structure
+            self.lu_fallbacks += 1;
+            let upper = matrix.symbolic();
+            let (col_ptr, row_idx) = (upper.col_ptr(), upper.row_idx());
+            if cache.full.is_none() {
+                let mut pairs = Vec::with_capacity(2 * row_idx.len());
+                for c in 0..n {
+                    for &r in &row_idx[col_ptr[c]..col_ptr[c + 1]] {
+                        pairs.push(Pair::new(r, c));
+                        if r != c {
+                            pairs.push(Pair::new(c, r));
+                        }
                     }
                 }
-                let m = SparseColMat::<usize, f64>::try_new_from_triplets(n, n, &full)
-                    .map_err(|e| solver_error("full matrix", e))?;
-                let lu = m.sp_lu().map_err(|e| solver_error("sparse LU", e))?;
-                lu.solve_in_place(x.as_mut());
+                let (sym, argsort) = SymbolicSparseColMat::try_new_from_indices(n, n, &pairs)
+                    .map_err(|e| solver_error("full pattern", e))?;
+                let lu = SymbolicLu::try_new(sym.as_ref())
+                    .map_err(|e| solver_error("symbolic LU", e))?;
+                cache.full = Some((sym, argsort, lu));
             }
+            let (sym, argsort, lu) = cache
+                .full
+                .as_ref()
+                .ok_or_else(|| FemError::LinearSolver("no LU structure".into()))?;
+            let upper_values = matrix.val();
+            let mut expanded = Vec::with_capacity(2 * upper_values.len());
+            for c in 0..n {
+                for k in col_ptr[c]..col_ptr[c + 1] {
+                    expanded.push(upper_values[k]);
+                    if row_idx[k] != c {
+                        expanded.push(upper_values[k]);
+                    }
+                }
+            }
+            let m = SparseColMat::new_from_argsort(sym.clone(), argsort, &expanded)
+                .map_err(|e| solver_error("full matrix", e))?;
+            let lu = Lu::try_new_with_symbolic(lu.clone(), m.as_ref())
+                .map_err(|e| solver_error("sparse LU", e))?;
+            lu.solve_in_place(x.as_mut());
         }
         let out: Vec<f64> = (0..n).map(|i| x[(i, 0)]).collect();
         if out.iter().any(|v| !v.is_finite()) {

@@ -26,6 +26,11 @@ pub struct NewtonSettings {
     pub absolute_tolerance: f64,
     /// Largest nodal correction per iteration (mm); longer Newton steps are scaled down.
     pub max_correction_mm: f64,
+    /// Give up early (the caller cuts the step) when, after this many iterations, the
+    /// residual is still above `1e-4` of the reference force: Newton is then wandering
+    /// (contact-set changes, a too-long step), and a halved step is cheaper than waiting
+    /// for `max_iterations`.
+    pub stall_iterations: usize,
 }
 
 impl Default for NewtonSettings {
@@ -35,6 +40,7 @@ impl Default for NewtonSettings {
             relative_tolerance: 1e-9,
             absolute_tolerance: 1e-10,
             max_correction_mm: f64::INFINITY,
+            stall_iterations: usize::MAX,
         }
     }
 }
@@ -127,6 +133,27 @@ impl Model {
     /// Number of symbolic factorisations performed (diagnostic).
     pub fn solver_symbolic_analyses(&self) -> usize {
         self.solver.symbolic_analyses
+    }
+
+    /// Reserve the sparsity-pattern entries coupling the given node pairs (all their free
+    /// dofs), so that contact terms appearing later need no new symbolic factorisation.
+    pub fn reserve_node_couplings(&mut self, pairs: &[(usize, usize)]) {
+        let mut entries = Vec::with_capacity(4 * pairs.len());
+        for &(a, b) in pairs {
+            for da in [2 * a, 2 * a + 1] {
+                for db in [2 * b, 2 * b + 1] {
+                    if let (Some(ea), Some(eb)) = (self.equation[da], self.equation[db]) {
+                        entries.push((ea, eb));
+                    }
+                }
+            }
+        }
+        self.solver.reserve(entries);
+    }
+
+    /// Number of linear solves that fell back to LDL^T and to LU (diagnostic).
+    pub fn solver_fallbacks(&self) -> (usize, usize) {
+        (self.solver.ldlt_fallbacks, self.solver.lu_fallbacks)
     }
 
     pub fn n_equations(&self) -> usize {
@@ -372,6 +399,13 @@ impl Model {
             {
                 self.newton_iterations += it;
                 return Ok(it);
+            }
+            if it >= self.newton.stall_iterations && norm > 1e-4 * reference {
+                self.newton_iterations += it;
+                return Err(NewtonFailure::NotConverged {
+                    residual: norm,
+                    reference,
+                });
             }
             // backtracking: if the last full step increased the residual, halve it
             if let Some((prev_norm, du)) = &mut last_step

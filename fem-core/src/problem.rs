@@ -91,6 +91,9 @@ pub struct SolverSettings {
     pub stage1_steps: usize,
     /// How many times a step may be halved.
     pub max_cuts: u32,
+    /// Newton gives up on a step still far from equilibrium after this many iterations
+    /// (see `NewtonSettings::stall_iterations`).
+    pub stall_iterations: usize,
     /// Overrides the shell's skirt length (verification problems only).
     pub shell_skirt_mm: f64,
 }
@@ -107,6 +110,7 @@ impl SolverSettings {
             penetration_tolerance_mm: 5e-4 * MeshSpec::for_level(level).sample_fine_size_mm,
             stage1_steps: 3,
             max_cuts: 10,
+            stall_iterations: 12,
             shell_skirt_mm: SHELL_SKIRT_MM,
         }
     }
@@ -300,8 +304,14 @@ impl Indentation {
                 c.slip_regularisation_mm = 1e-3 * settings.mesh.sample_fine_size_mm;
             }
         }
+        if let Some(contact) = &model.contact {
+            // the bodies slide by well under 1.5 mm relative to each other (h <= 3 mm)
+            let pairs = contact.candidate_node_pairs(&model.mesh.nodes, 1.5);
+            model.reserve_node_couplings(&pairs);
+        }
         model.newton.max_correction_mm =
             settings.max_correction * settings.mesh.sample_fine_size_mm;
+        model.newton.stall_iterations = settings.stall_iterations;
         // round-off floor of the residual: stresses carry ~1e-16 relative error of the
         // stiffest modulus over ~mm^2 areas
         let stiffest = model

@@ -4,7 +4,7 @@
 
 use std::time::Instant;
 
-use rayon::prelude::*;
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 use super::error::LutError;
 use super::grid::{LutGrid, Shard};
@@ -70,29 +70,52 @@ where
     let indices: Vec<usize> = (0..grid.curve_count())
         .filter(|&i| shard.is_none_or(|s| s.contains(i)))
         .collect();
-    let curves: Vec<LutCurve> = indices
-        .par_iter()
-        .with_max_len(1)
-        .map(|&index| {
-            let params = grid.curve_params(index);
-            let start = Instant::now();
-            let result = solver(&params)
-                .map_err(|e| e.to_string())
-                .and_then(|curve| LutCurve::from_curve(index, &params, &curve));
-            let seconds = start.elapsed().as_secs_f64();
-            let curve = match result {
-                Ok(c) => c,
-                Err(reason) => LutCurve::failed(index, reason),
+    // Longest curves first (frictional, soft, high pressure: measured slowest), pulled one
+    // at a time from a shared queue by every worker of the pool, so no worker is left
+    // with a slow curve at the end (longest-processing-time-first scheduling).
+    let mut queue = indices;
+    queue.sort_by(|&a, &b| {
+        let (pa, pb) = (grid.curve_params(a), grid.curve_params(b));
+        pb.friction
+            .total_cmp(&pa.friction)
+            .then(pa.sample_modulus_kpa.total_cmp(&pb.sample_modulus_kpa))
+            .then(pb.pressure_kpa.total_cmp(&pa.pressure_kpa))
+            .then(a.cmp(&b))
+    });
+    let next = AtomicUsize::new(0);
+    let solve_one = |index: usize| {
+        let params = grid.curve_params(index);
+        let start = Instant::now();
+        let result = solver(&params)
+            .map_err(|e| e.to_string())
+            .and_then(|curve| LutCurve::from_curve(index, &params, &curve));
+        let seconds = start.elapsed().as_secs_f64();
+        let curve = match result {
+            Ok(c) => c,
+            Err(reason) => LutCurve::failed(index, reason),
+        };
+        on_curve(&CurveReport {
+            index,
+            what: grid.describe(index),
+            seconds,
+            failure: curve.failure.clone(),
+        });
+        curve
+    };
+    let per_worker: Vec<Vec<LutCurve>> = rayon::broadcast(|_| {
+        let mut mine = Vec::new();
+        loop {
+            let k = next.fetch_add(1, Ordering::Relaxed);
+            let Some(&index) = queue.get(k) else {
+                break;
             };
-            on_curve(&CurveReport {
-                index,
-                what: grid.describe(index),
-                seconds,
-                failure: curve.failure.clone(),
-            });
-            curve
-        })
-        .collect();
+            mine.push(solve_one(index));
+        }
+        mine
+    });
+    let mut curves: Vec<LutCurve> = per_worker.into_iter().flatten().collect();
+    // grid order, whatever worker finished first
+    curves.sort_by_key(|c| c.index);
     Ok(Lut {
         grid: grid.clone(),
         fem_core_version: Lut::this_fem_core_version(),
