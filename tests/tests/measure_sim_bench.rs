@@ -16,7 +16,7 @@ use host::calibration::{
 use host::experiment::IndentationPlan;
 use host::experiment::measurement::{LutInfo, run_measurement};
 use host::experiment::simulated::{
-    DEMO_MAX_DEPTH_MM, DEMO_MESH_LEVEL, DEMO_STEPS, SimRadiusSource, demo_scenario,
+    DEMO_MAX_DEPTH_MM, DEMO_RIGID_MESH_LEVEL, DEMO_STEPS, SimRadiusSource, demo_scenario,
     fixture_lut_path, px_per_mm_from_reference_disc, reference_frame, rigid_scenario,
     start_and_connect,
 };
@@ -55,7 +55,7 @@ fn calibrate_then_measure_against_the_pty_bench() {
     drop(link);
     bench.stop();
     let rigid =
-        RigidSampleCurve::solve(6.0, DEMO_MESH_LEVEL, DEMO_STEPS, DEMO_MAX_DEPTH_MM).unwrap();
+        RigidSampleCurve::solve(6.0, DEMO_RIGID_MESH_LEVEL, DEMO_STEPS, DEMO_MAX_DEPTH_MM).unwrap();
     record.set_proximity(&fit_sweep(&data, plan.contact_load_n, Some(&rigid)).unwrap());
     let px = px_per_mm_from_reference_disc(&scenario, &[1.2, 2.0, 2.8, 3.4]).unwrap();
     record.px_per_mm = Some(px.px_per_mm);

@@ -101,6 +101,9 @@ pub struct SweepData {
     pub stage_mm: Vec<f64>,
     pub proximity_v: Vec<f64>,
     pub load_n: Vec<Option<f64>>,
+    /// Gauge pressure (manometer minus zero) at each sample.
+    #[serde(default)]
+    pub p_kpa: Vec<f64>,
 }
 
 /// Moves the stage to `target_mm` and collects samples until it stops there.
@@ -174,10 +177,13 @@ pub fn proximity_sweep(
         ..SweepData::default()
     };
     for s in &sweep {
-        if let (Some(steps), Some(counts)) = (s.stage_steps, s.proximity_counts) {
+        if let (Some(steps), Some(counts), Some(p)) =
+            (s.stage_steps, s.proximity_counts, s.manometer_counts)
+        {
             data.stage_mm.push(units.stage_mm(steps));
             data.proximity_v.push(units.proximity_v(counts));
             data.load_n.push(s.load_counts.map(|c| units.load_n(c)));
+            data.p_kpa.push(units.manometer_kpa(p) - manometer_zero_kpa);
         }
     }
     Ok(data)
@@ -221,6 +227,14 @@ pub fn fit_sweep(
         .map(|i| (data.stage_mm[i], data.proximity_v[i]))
         .collect();
     let to_u = |h: f64| rigid.map_or(h, |r| r.u_s_mm(h));
+    // The mirror sits on the inflated apex: at a pressure p(t) off the nominal one it is
+    // displaced by k (p - p_nominal), k from fem-core's inflation of the free shell. The
+    // parabola is fitted against u_s at the nominal pressure, u_s(h) - k (p - p_nominal),
+    // and measurements add k (p - p_nominal) back (ProximityCalibration::u_s_mm_at).
+    let k_apex = rigid.map_or(0.0, RigidSampleCurve::apex_mm_per_kpa);
+    let dp: Vec<f64> = (0..n)
+        .map(|i| data.p_kpa.get(i).map_or(0.0, |p| p - data.pressure_kpa))
+        .collect();
     // The load detects contact 10-30 µm late on the compliant pressurised shell; refine it
     // as the hinge: U = C before c and the parabola in u_s(h - c) after, minimising the
     // residual over c in 1 µm steps up to 0.15 mm before the load-detected point.
@@ -246,8 +260,12 @@ pub fn fit_sweep(
         .filter(|(h, _)| *h > 0.0)
         .collect();
     let with_h = ProximityCalibration::fit(data.pressure_kpa, &beyond)?;
-    let corrected: Vec<(f64, f64)> = beyond.iter().map(|&(h, v)| (to_u(h), v)).collect();
-    let calibration = ProximityCalibration::fit(data.pressure_kpa, &corrected)?;
+    let corrected: Vec<(f64, f64)> = (0..n)
+        .filter(|&i| raw[i].0 - contact_mm > 0.0)
+        .map(|i| (to_u(raw[i].0 - contact_mm) - k_apex * dp[i], raw[i].1))
+        .collect();
+    let mut calibration = ProximityCalibration::fit(data.pressure_kpa, &corrected)?;
+    calibration.apex_mm_per_kpa = k_apex;
     let mut max_diff: f64 = 0.0;
     let mut at_max = 0.0;
     for &(_, v) in &beyond {

@@ -28,6 +28,11 @@ pub struct ProximityCalibration {
     /// u_s range calibrated.
     pub u_s_min_mm: f64,
     pub u_s_max_mm: f64,
+    /// How far the apex mirror moves outward per kPa of internal pressure (the shell's
+    /// inflation; fem-core): readings at a pressure p other than `p_air_kpa` are corrected
+    /// by + apex_mm_per_kpa (p - p_air_kpa) ([`Self::u_s_mm_at`]). 0: no correction.
+    #[serde(default)]
+    pub apex_mm_per_kpa: f64,
 }
 
 /// Why a calibration failed.
@@ -94,12 +99,19 @@ impl ProximityCalibration {
             points: pairs.len(),
             u_s_min_mm: u_min,
             u_s_max_mm: u_max,
+            apex_mm_per_kpa: 0.0,
         })
     }
 
     /// U at u_s.
     pub fn volts(&self, u_s_mm: f64) -> f64 {
         (self.a_v_per_mm2 * u_s_mm + self.b_v_per_mm) * u_s_mm + self.c_v
+    }
+
+    /// u_s from U read at internal pressure `p_kpa`: the parabola's u_s plus the apex
+    /// inflation difference to the calibration pressure.
+    pub fn u_s_mm_at(&self, volts: f64, p_kpa: f64) -> Result<f64, ProximityError> {
+        Ok(self.u_s_mm(volts)? + self.apex_mm_per_kpa * (p_kpa - self.p_air_kpa))
     }
 
     /// u_s from U: the root of the parabola inside the calibrated range (extended by 20 %

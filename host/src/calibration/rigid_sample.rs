@@ -20,6 +20,10 @@ pub struct RigidSampleCurve {
     pub mesh_level: i32,
     pub h_mm: Vec<f64>,
     pub u_s_mm: Vec<f64>,
+    /// Outward apex displacement of the free shell inflated to `pressure_kpa` (fem-core
+    /// stage 1): the proximity mirror moves with it, so a pressure error moves the reading.
+    #[serde(default)]
+    pub inflation_apex_mm: f64,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -61,6 +65,7 @@ impl RigidSampleCurve {
             mesh_level,
             h_mm: curve.points.iter().map(|p| p.h_mm).collect(),
             u_s_mm: curve.points.iter().map(|p| p.u_s_mm).collect(),
+            inflation_apex_mm: curve.inflation_apex_mm,
         })
     }
 
@@ -78,6 +83,15 @@ impl RigidSampleCurve {
         let t = (h_mm - self.h_mm[k]) / (self.h_mm[k + 1] - self.h_mm[k]);
         self.u_s_mm[k] + t * (self.u_s_mm[k + 1] - self.u_s_mm[k])
     }
+
+    /// d(apex inflation)/dp, as the secant apex / p at the solved pressure (mm/kPa).
+    pub fn apex_mm_per_kpa(&self) -> f64 {
+        if self.pressure_kpa > 0.0 {
+            self.inflation_apex_mm / self.pressure_kpa
+        } else {
+            0.0
+        }
+    }
 }
 
 #[cfg(test)]
@@ -91,6 +105,7 @@ mod tests {
             mesh_level: 0,
             h_mm: vec![0.0, 1.0, 2.0],
             u_s_mm: vec![0.0, 1.02, 2.04],
+            inflation_apex_mm: 0.05,
         };
         assert_eq!(c.u_s_mm(-0.1), -0.1);
         assert!((c.u_s_mm(0.5) - 0.51).abs() < 1e-12);

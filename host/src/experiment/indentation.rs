@@ -79,15 +79,17 @@ fn displacement(
 ) -> Option<DisplacementSample> {
     let u = link.units();
     let volts = u.proximity_v(s.sample.proximity_counts?);
+    let p_air_kpa = s
+        .sample
+        .manometer_counts
+        .map(|c| u.manometer_kpa(c) - manometer_zero_kpa)?;
     Some(DisplacementSample {
         host_time_us: s.host_time_us,
-        u_s_mm: proximity.u_s_mm(volts).ok()?,
+        // the apex mirror moves with the inflation: corrected to the calibration pressure
+        u_s_mm: proximity.u_s_mm_at(volts, p_air_kpa).ok()?,
         stage_mm: u.stage_mm(s.sample.stage_steps?),
         load_n: s.sample.load_counts.map(|c| u.load_n(c)),
-        p_air_kpa: s
-            .sample
-            .manometer_counts
-            .map(|c| u.manometer_kpa(c) - manometer_zero_kpa)?,
+        p_air_kpa,
     })
 }
 

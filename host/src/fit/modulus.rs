@@ -18,10 +18,14 @@
 //! - replicates (two or more `test` values with enough points): each replicate is fitted
 //!   alone; the standard error of the mean of their ln E2 is sd / sqrt(m), Student t with
 //!   m - 1 degrees of freedom. This captures run-to-run scatter whatever its correlation
-//!   within a run. The interval uses the larger of the two standard errors.
+//!   within a run. The interval uses the larger of the two standard errors;
+//! - the table's interpolation in ln E2, added in quadrature: the points are fitted again
+//!   with the table interpolated linearly in ln E2 between its nodes, and
+//!   |ln E2(PCHIP) - ln E2(linear)| is taken as the half-width (a conservative bound:
+//!   linear interpolation's error is second order in the node spacing, PCHIP's higher).
 //!
-//! Neither term includes the table's own interpolation error or model error (a wrong
-//! friction, thickness, ...): those are systematic and are what the diagnosis looks for.
+//! Model error (a wrong friction, thickness, ...) and calibration error are not in the
+//! interval: they are systematic and are what the diagnosis looks for.
 
 use serde::Serialize;
 
@@ -107,6 +111,11 @@ pub struct ModulusFit {
     pub se_ln_modulus_residual: f64,
     pub se_ln_modulus_replicates: f64,
     pub iterations: usize,
+    /// The same fit with the table interpolated linearly (instead of PCHIP) in ln E2
+    /// between its nodes: the difference bounds the table's interpolation error.
+    pub modulus_linear_interpolation_kpa: f64,
+    /// Half-width (in ln E2) added in quadrature for the table's interpolation error.
+    pub interpolation_half_width_ln: f64,
     pub load_channel_used: bool,
     pub rms_residual_load_n: Option<f64>,
 }
@@ -204,6 +213,9 @@ struct Problem<'m, 'a> {
     cubics: std::cell::RefCell<Vec<IntervalCubic>>,
     /// node_values[node * points.len() + point], filled on first use.
     node_values: std::cell::RefCell<Vec<NodeValue>>,
+    /// Interpolate linearly in ln E2 between the node values instead of the table's PCHIP
+    /// (the interpolation-error check).
+    linear: std::cell::Cell<bool>,
 }
 
 impl<'m, 'a> Problem<'m, 'a> {
@@ -220,6 +232,7 @@ impl<'m, 'a> Problem<'m, 'a> {
                 ln_nodes.len() * points.len()
             ]),
             ln_nodes,
+            linear: std::cell::Cell::new(false),
         }
     }
 
@@ -250,6 +263,13 @@ impl<'m, 'a> Problem<'m, 'a> {
             return None;
         }
         let k = nodes.partition_point(|&v| v <= x).clamp(1, nodes.len() - 1) - 1;
+        if self.linear.get()
+            && let (Some((y1, _)), Some((y2, _))) =
+                (self.node_value(i, k), self.node_value(i, k + 1))
+        {
+            let slope = (y2 - y1) / (nodes[k + 1] - nodes[k]);
+            return Some((y1 + slope * (x - nodes[k]), slope));
+        }
         let cell = k * self.points.len() + i;
         let known = self.cubics.borrow()[cell];
         let cubic = match known {
@@ -668,22 +688,43 @@ pub fn fit_modulus(
     } else {
         (0.0, 0.0)
     };
+    // Table interpolation: the same points fitted with the table interpolated linearly in
+    // ln E2 between its nodes. Linear interpolation's error (second order in the node
+    // spacing) is larger than PCHIP's, so |ln E_pchip - ln E_linear| is a conservative
+    // estimate of the PCHIP table's interpolation error at this estimate; it is added in
+    // quadrature to the statistical half-width (it is systematic: replicates share it).
+    let nearest_node = |x: f64| {
+        model
+            .moduli_kpa()
+            .iter()
+            .enumerate()
+            .min_by(|a, b| (a.1.ln() - x).abs().total_cmp(&(b.1.ln() - x).abs()))
+            .map(|(k, _)| k)
+    };
+    a_only.linear.set(true);
+    let x_linear = a_only
+        .solve(&core.used, options.max_iterations, nearest_node(core.x))
+        .map(|c| c.x)
+        .unwrap_or(core.x);
+    a_only.linear.set(false);
+    let half_interp = (core.x - x_linear).abs();
     let (half, method, description) = if half_rep > half_resid {
         (
-            half_rep,
+            half_rep.hypot(half_interp),
             CiMethod::Replicates,
             format!(
-                "between-replicate scatter of {} per-replicate fits (standard error of the mean ln E2, Student t with {} dof); larger than the residual-model interval",
+                "between-replicate scatter of {} per-replicate fits (standard error of the mean ln E2, Student t with {} dof); larger than the residual-model interval; plus in quadrature the table interpolation term |ln E(PCHIP) - ln E(linear in ln E2)| = {:.4}",
                 replicate_moduli.len(),
-                replicate_moduli.len() - 1
+                replicate_moduli.len() - 1,
+                half_interp
             ),
         )
     } else {
         (
-            half_resid,
+            half_resid.hypot(half_interp),
             CiMethod::ResidualAr1,
             format!(
-                "residual variance with AR(1) within-curve correlation (lag-1 rho = {rho:.2}, {n_eff:.1} effective of {n} points, Student t){}",
+                "residual variance with AR(1) within-curve correlation (lag-1 rho = {rho:.2}, {n_eff:.1} effective of {n} points, Student t){}; plus in quadrature the table interpolation term |ln E(PCHIP) - ln E(linear in ln E2)| = {half_interp:.4}",
                 if replicate_moduli.len() >= 2 {
                     "; larger than the between-replicate interval"
                 } else {
@@ -736,6 +777,8 @@ pub fn fit_modulus(
         se_ln_modulus_residual: se_resid,
         se_ln_modulus_replicates: se_rep,
         iterations: core.iterations,
+        modulus_linear_interpolation_kpa: x_linear.exp(),
+        interpolation_half_width_ln: half_interp,
         load_channel_used: load_used,
         rms_residual_load_n: core.rms_load,
     })
