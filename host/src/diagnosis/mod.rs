@@ -515,8 +515,12 @@ pub fn diagnose(
             delta_chi2: s.delta_chi2,
             screen_delta_chi2: s.screen_delta_chi2,
             signature_similarity: winner.as_ref().and_then(|w| {
-                let a = sigs.iter().find(|g| g.candidate == w.candidate)?;
-                let b = sigs.iter().find(|g| g.candidate == s.candidate)?;
+                let a = sigs
+                    .iter()
+                    .find(|g| g.local && g.candidate == w.candidate)?;
+                let b = sigs
+                    .iter()
+                    .find(|g| g.local && g.candidate == s.candidate)?;
                 Some(signatures::similarity(a, b))
             }),
             in_ambiguity_group: decision.group.contains(&s.effect),

@@ -124,11 +124,13 @@ impl AxisSurfaces<'_> {
 #[derive(Debug, Clone)]
 pub struct Model<'a> {
     pub base: Surface<'a>,
+    pub base_lut: &'a Lut,
     pub axes: Vec<AxisSurfaces<'a>>,
 }
 
 impl<'a> Model<'a> {
     pub fn new(base: &'a Lut, effects: &'a [EffectTable]) -> Result<Self, String> {
+        let base_lut = base;
         let base = Surface::new(base, &fem_core::lut::EffectSelection::default())
             .map_err(|e| format!("baseline table: {e}"))?;
         let mut axes = Vec::new();
@@ -146,11 +148,68 @@ impl<'a> Model<'a> {
                 source: t.path.clone(),
             });
         }
-        Ok(Self { base, axes })
+        Ok(Self {
+            base,
+            base_lut,
+            axes,
+        })
     }
 
     pub fn axis(&self, axis: EffectAxis) -> Option<&AxisSurfaces<'a>> {
         self.axes.iter().find(|a| a.axis == axis)
+    }
+
+    /// Interpolation error along u_s of the baseline table at the node curve nearest to
+    /// (E2, p_air): |PCHIP - chord| through the same nodes (the error bound of the lower-order
+    /// interpolant; a reader that joins the table's steps by chords, like hil-sim's plant,
+    /// differs from the table's PCHIP by exactly this).
+    pub fn u_interpolation_error_mm(&self, e: f64, p: f64, u: f64) -> f64 {
+        let g = &self.base_lut.grid;
+        let nearest = |axis: &[f64], x: f64, log: bool| {
+            (0..axis.len())
+                .min_by(|&a, &b| {
+                    let d = |v: f64| {
+                        if log {
+                            (v.ln() - x.ln()).abs()
+                        } else {
+                            (v - x).abs()
+                        }
+                    };
+                    d(axis[a]).total_cmp(&d(axis[b]))
+                })
+                .unwrap_or(0)
+        };
+        let (ke, kp) = (
+            nearest(&g.modulus_kpa, e, true),
+            nearest(&g.pressure_kpa, p, false),
+        );
+        let idx = g.flat_index(fem_core::lut::GridIndex {
+            stiffening: 0,
+            material: 0,
+            friction: 0,
+            thickness: 0,
+            pressure: kp,
+            modulus: ke,
+        });
+        let Some(c) = self.base_lut.curve(idx) else {
+            return 0.0;
+        };
+        // the strictly increasing run of u_s, as the table's interpolation uses
+        let mut us = Vec::new();
+        let mut as_ = Vec::new();
+        for k in 0..c.len() {
+            if us.last().is_none_or(|&l| c.u_s_mm[k] > l) {
+                us.push(c.u_s_mm[k]);
+                as_.push(c.a_mm[k]);
+            }
+        }
+        if us.len() < 3 || u <= us[0] || u >= us[us.len() - 1] {
+            return 0.0;
+        }
+        let j = us.partition_point(|&x| x <= u).clamp(1, us.len() - 1) - 1;
+        let chord = as_[j] + (as_[j + 1] - as_[j]) * (u - us[j]) / (us[j + 1] - us[j]);
+        let (cubic, _) = fem_core::lut::pchip::eval(&us, &as_, u);
+        (cubic - chord).abs()
     }
 
     /// d a / d u_s of the baseline (central difference), for the u_s-offset noise term.

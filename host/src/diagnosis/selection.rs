@@ -201,11 +201,16 @@ pub fn screen_and_refit(
 ) -> Vec<Screened> {
     let mut out: Vec<Screened> = sigs
         .iter()
+        .filter(|s| s.local)
         .map(|s| Screened {
             effect: s.candidate.kind.name().to_string(),
             label: s.candidate.label(),
             candidate: s.candidate,
-            screen_delta_chi2: s.score(&base.whitened),
+            screen_delta_chi2: sigs
+                .iter()
+                .filter(|g| g.candidate == s.candidate)
+                .map(|g| g.score(&base.whitened))
+                .fold(0.0, f64::max),
             fit: None,
             delta_chi2: None,
             aic: None,
@@ -224,7 +229,11 @@ pub fn screen_and_refit(
         if refitted_kinds.contains(&s.candidate.kind) && s.candidate.tau_h_mm.is_none() {
             continue;
         }
-        let sig = sigs.iter().find(|g| g.candidate == s.candidate);
+        // start at the linearised estimate of the best-scoring secant
+        let sig = sigs
+            .iter()
+            .filter(|g| g.candidate == s.candidate)
+            .max_by(|a, b| a.score(&base.whitened).total_cmp(&b.score(&base.whitened)));
         let theta0 = sig.map_or(0.0, |g| g.theta_estimate(&base.whitened));
         // start from the linearised estimate and from a small step, keep the better
         let mut best: Option<GlsFit> = None;

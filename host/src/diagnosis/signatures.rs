@@ -26,6 +26,11 @@ pub struct Signature {
     pub norm: f64,
     /// Only positive parameters are allowed.
     pub one_sided: bool,
+    /// Parameter value of the secant: the local derivative (one small step) or a secant to a
+    /// larger value, (f(theta_p) - f(0)) / theta_p.
+    pub probe: f64,
+    /// True for the local derivative.
+    pub local: bool,
 }
 
 impl Signature {
@@ -91,29 +96,43 @@ pub fn signatures(
         h,
     );
     let jj = dot(&j, &j).max(1e-300);
-    let sigs = candidates
-        .iter()
-        .map(|c| {
-            let step = c.kind.step();
+    let mut sigs = Vec::new();
+    for c in candidates {
+        let (_, lo, hi) = c.kind.parameter();
+        let step = c.kind.step();
+        // the local derivative and secants to a quarter, half and all of the range (both
+        // signs for two-sided effects): a nonlinear effect (a table axis joined linearly
+        // between its values) reaches residual shapes its local derivative does not, and
+        // the bootstrap threshold must see them too
+        let mut probes = vec![(step, true)];
+        for f in [0.25, 0.5, 1.0] {
+            probes.push((f * hi, false));
+            if lo < 0.0 {
+                probes.push((f * lo, false));
+            }
+        }
+        for (probe, local) in probes {
             let g = whitened_derivative(
                 points,
                 subset,
                 whitener,
                 &f0,
-                |p| predict_a(model, Some(c), e, step, p),
-                step,
+                |p| predict_a(model, Some(c), e, probe, p),
+                probe,
             );
             let k = dot(&j, &g) / jj;
             let g_perp: Vec<f64> = g.iter().zip(&j).map(|(a, b)| a - k * b).collect();
             let norm = dot(&g_perp, &g_perp).sqrt();
-            Signature {
+            sigs.push(Signature {
                 candidate: *c,
                 g_perp,
                 norm,
-                one_sided: c.kind.parameter().1 >= 0.0,
-            }
-        })
-        .collect();
+                one_sided: lo >= 0.0,
+                probe,
+                local,
+            });
+        }
+    }
     (j, sigs)
 }
 
@@ -137,8 +156,9 @@ pub struct AmbiguousPair {
 /// the most similar one).
 pub fn ambiguous_pairs(sigs: &[Signature]) -> Vec<AmbiguousPair> {
     let mut out: Vec<AmbiguousPair> = Vec::new();
-    for (i, a) in sigs.iter().enumerate() {
-        for b in &sigs[i + 1..] {
+    let local: Vec<&Signature> = sigs.iter().filter(|s| s.local).collect();
+    for (i, a) in local.iter().enumerate() {
+        for b in &local[i + 1..] {
             if a.candidate.kind == b.candidate.kind {
                 continue;
             }

@@ -23,9 +23,9 @@ use super::candidates::EffectKind;
 use super::data::Point;
 use super::tables::{EFFECT_MAX_DEPTH_MM, EFFECT_MESH_LEVEL};
 
-/// Load steps of the truth solves (finer than the tables', so the simulator's piecewise-
-/// linear interpolation in h adds little structure of its own).
-pub const TRUTH_STEPS: usize = 40;
+/// Load steps of the truth solves: the tables' (mesh level and steps must match, or the
+/// difference shows up as structure).
+pub const TRUTH_STEPS: usize = super::tables::EFFECT_STEPS;
 
 /// The hidden effect of a simulation (never given to the diagnosis).
 #[derive(Debug, Clone, Copy, PartialEq)]

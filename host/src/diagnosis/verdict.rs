@@ -51,7 +51,7 @@ pub struct MinimumDetectable {
 /// Minimum detectable sizes (best variant per effect).
 pub fn minimum_detectable(sigs: &[Signature], threshold: f64) -> Vec<MinimumDetectable> {
     let mut out: Vec<MinimumDetectable> = Vec::new();
-    for s in sigs {
+    for s in sigs.iter().filter(|s| s.local) {
         let size = if s.norm > 0.0 {
             (threshold.max(0.0).sqrt() + 0.8416) / s.norm
         } else {
