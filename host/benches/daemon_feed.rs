@@ -134,14 +134,25 @@ fn main() {
         let t0 = Instant::now();
         let mut lat_ms = Vec::new();
         let mut raw = 0u64;
+        let mut frames = 0u64;
+        let mut daemon_ms = Vec::new();
         while t0.elapsed().as_secs_f64() < seconds {
             let Ok((at, e)) = rx.recv_timeout(Duration::from_secs(1)) else {
                 continue;
             };
+            if let Event::Frame { .. } = e {
+                frames += 1;
+            }
             if let Event::Sample {
-                device_time_us, n, ..
+                device_time_us,
+                n,
+                received_unix_us,
+                ..
             } = e
             {
+                // The daemon's own path: transport read -> client (same process clock).
+                let now_us = host::daemon::api::unix_us();
+                daemon_ms.push(now_us.saturating_sub(received_unix_us) as f64 * 1e-3);
                 raw += u64::from(n);
                 if let Some(epoch) = probe.epoch() {
                     let sim_s = clock.host_s(device_time_us as f64);
@@ -153,12 +164,14 @@ fn main() {
         let wall = t0.elapsed().as_secs_f64();
         let b = thread_ticks();
         lat_ms.sort_by(f64::total_cmp);
+        daemon_ms.sort_by(f64::total_cmp);
         let (cpu, parts) = daemon_share(&a, &b, wall);
         println!("{label}:");
         println!(
-            "  live feed: {} sample events ({:.0} raw samples/s) in {wall:.1} s",
+            "  live feed: {} sample events ({:.0} raw samples/s), {:.1} measured frames/s in {wall:.1} s",
             lat_ms.len(),
-            raw as f64 / wall
+            raw as f64 / wall,
+            frames as f64 / wall
         );
         println!(
             "  latency device sample -> client (ms): p50 {:.2}  p95 {:.2}  p99 {:.2}  max {:.2}",
@@ -166,6 +179,13 @@ fn main() {
             percentile(&lat_ms, 0.95),
             percentile(&lat_ms, 0.99),
             lat_ms.last().copied().unwrap_or(f64::NAN)
+        );
+        println!(
+            "  of which daemon read -> client (ms): p50 {:.2}  p95 {:.2}  p99 {:.2}  max {:.2}",
+            percentile(&daemon_ms, 0.5),
+            percentile(&daemon_ms, 0.95),
+            percentile(&daemon_ms, 0.99),
+            daemon_ms.last().copied().unwrap_or(f64::NAN)
         );
         println!("  daemon CPU: {cpu:.1} % of one core ({parts})");
     };
