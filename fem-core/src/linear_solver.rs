@@ -79,6 +79,9 @@ pub struct SymmetricSolver {
     pub ldlt_fallbacks: usize,
     /// Number of factorisations that fell back further to LU (LDL^T hit a zero pivot).
     pub lu_fallbacks: usize,
+    /// Skip the LDL^T attempt and factor an indefinite tangent with pivoting LU directly
+    /// (more robust at limit points, where LDL^T without pivoting may lose accuracy).
+    pub indefinite_with_lu: bool,
     /// Upper-triangle index pairs always included in the pattern (see [`Self::reserve`]).
     reserved: Vec<Pair<usize, usize>>,
 }
@@ -218,7 +221,7 @@ impl SymmetricSolver {
                 stack,
             );
             solved = true;
-        } else {
+        } else if !self.indefinite_with_lu {
             // not positive definite (far from equilibrium, or past a limit point): LDL^T
             // without pivoting on the same structure; it fails only on a zero pivot
             self.ldlt_fallbacks += 1;

@@ -151,6 +151,12 @@ impl Model {
         self.solver.reserve(entries);
     }
 
+    /// Factor indefinite tangents with pivoting LU instead of LDL^T (see
+    /// [`SymmetricSolver::indefinite_with_lu`]).
+    pub fn set_indefinite_with_lu(&mut self, on: bool) {
+        self.solver.indefinite_with_lu = on;
+    }
+
     /// Number of linear solves that fell back to LDL^T and to LU (diagnostic).
     pub fn solver_fallbacks(&self) -> (usize, usize) {
         (self.solver.ldlt_fallbacks, self.solver.lu_fallbacks)

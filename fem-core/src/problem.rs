@@ -551,8 +551,12 @@ fn contact_edge_mm(
     r(k) + t.clamp(0.0, 1.0) * (r(k + 1) - r(k))
 }
 
-/// Drive `solve(target, state)` from `from` to `to` in increments starting at `increment`,
-/// halving on failure (at most `max_cuts` times in a row) and growing back after success.
+/// Consecutive step cuts after which stalled Newton iterations are no longer abandoned early.
+const STALL_CUTS: u32 = 2;
+
+/// Drive `solve(target, state, cuts)` from `from` to `to` in increments starting at `increment`,
+/// halving on failure (at most `max_cuts` times in a row) and growing back after success;
+/// when the cuts are exhausted, one direct attempt at `to` (jumping a snap-through).
 #[allow(clippy::too_many_arguments)] // a private driver; the call sites name every argument
 fn continuation(
     from: f64,
@@ -560,7 +564,7 @@ fn continuation(
     increment: f64,
     max_cuts: u32,
     state: &mut Vec<f64>,
-    mut solve: impl FnMut(f64, &mut Vec<f64>) -> Result<(), NewtonFailure>,
+    mut solve: impl FnMut(f64, &mut Vec<f64>, u32) -> Result<(), NewtonFailure>,
     mut on_failure_restore: impl FnMut(),
     mut on_success_commit: impl FnMut(&[f64], &[f64]),
     stage: &'static str,
@@ -572,7 +576,7 @@ fn continuation(
     while done < to - 1e-12 * to.abs().max(1.0) {
         let target = (done + step).min(to);
         let mut trial = state.clone();
-        match solve(target, &mut trial) {
+        match solve(target, &mut trial, cuts) {
             Ok(()) => {
                 on_success_commit(state, &trial);
                 *state = trial;
@@ -585,6 +589,20 @@ fn continuation(
             Err(failure) => {
                 on_failure_restore();
                 cuts += 1;
+                if cuts > max_cuts && target < to {
+                    // no equilibrium reachable by small steps (a limit point: the shell
+                    // snaps through): try the end of the increment directly, which lands
+                    // on the branch beyond the snap if Newton can reach it (what the
+                    // quasi-static sensor sees after the jump)
+                    let mut trial = state.clone();
+                    if solve(to, &mut trial, cuts).is_ok() {
+                        on_success_commit(state, &trial);
+                        *state = trial;
+                        done = to;
+                        continue;
+                    }
+                    on_failure_restore();
+                }
                 if cuts > max_cuts {
                     return Err(FemError::NoConvergence {
                         stage,
@@ -659,7 +677,7 @@ fn solve_stages(
             params.pressure_kpa / steps,
             settings.max_cuts,
             &mut u,
-            |p, state| cell.borrow_mut().solve_equilibrium(state, p).map(|_| ()),
+            |p, state, _| cell.borrow_mut().solve_equilibrium(state, p).map(|_| ()),
             || {},
             |_: &[f64], _: &[f64]| {},
             "stage 1 (inflation)",
@@ -691,10 +709,18 @@ fn solve_stages(
             dh,
             settings.max_cuts,
             &mut state,
-            |h, s| {
-                ind_cell
-                    .borrow_mut()
-                    .solve_step(s, h, params.pressure_kpa, settings)
+            |h, s, cuts| {
+                let mut ind = ind_cell.borrow_mut();
+                // early give-up only while cutting is still cheap; after a few consecutive
+                // cuts Newton gets its full iteration budget,
+                ind.model.newton.stall_iterations = if cuts < STALL_CUTS {
+                    settings.stall_iterations
+                } else {
+                    usize::MAX
+                };
+                // and indefinite tangents (a limit point) get the pivoting LU
+                ind.model.set_indefinite_with_lu(cuts >= STALL_CUTS);
+                ind.solve_step(s, h, params.pressure_kpa, settings)
             },
             || {
                 let mut ind = ind_cell.borrow_mut();
