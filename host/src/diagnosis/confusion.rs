@@ -72,8 +72,25 @@ pub fn run(
             ..SimSpec::default()
         };
         let scenario = truth_scenario(&sim0);
-        let mech = truth_mechanics(&scenario).map_err(|e| e.to_string())?;
         let truth = hidden.map_or("none".to_string(), |h| h.kind.name().to_string());
+        let mech = match truth_mechanics(&scenario) {
+            Ok(m) => m,
+            Err(e) => {
+                // a truth the FE cannot solve is reported, not fatal
+                progress(&format!("{truth}: truth not simulated: {e}"));
+                for &noise in &spec.noise_levels {
+                    rows.push(Row {
+                        truth: truth.clone(),
+                        size: hidden.map(|h| h.size),
+                        noise,
+                        outcomes: vec![format!("truth not simulated: {e}")],
+                        correct: 0,
+                        mean_gap_shrink: None,
+                    });
+                }
+                continue;
+            }
+        };
         for &noise in &spec.noise_levels {
             let mut outcomes = Vec::new();
             let mut correct = 0;

@@ -23,9 +23,14 @@ use super::candidates::EffectKind;
 use super::data::Point;
 use super::tables::{EFFECT_MAX_DEPTH_MM, EFFECT_MESH_LEVEL};
 
-/// Load steps of the truth solves: the tables' (mesh level and steps must match, or the
-/// difference shows up as structure).
-pub const TRUTH_STEPS: usize = super::tables::EFFECT_STEPS;
+/// Load steps of the truth solves: the tables' step of 0.1 mm of tube travel (mesh level
+/// and steps must match, or the difference shows up as structure), to 1.9 mm (the ramp
+/// goes to 1.8 mm; the last 0.1 mm of the tables is where thin or soft samples can stop
+/// converging).
+pub const TRUTH_STEPS: usize = super::tables::EFFECT_STEPS - 1;
+/// Final tube travel of the truth solves.
+pub const TRUTH_MAX_DEPTH_MM: f64 =
+    EFFECT_MAX_DEPTH_MM * (TRUTH_STEPS as f64) / (super::tables::EFFECT_STEPS as f64);
 
 /// The hidden effect of a simulation (never given to the diagnosis).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -132,7 +137,7 @@ pub fn truth_scenario(spec: &SimSpec) -> Scenario {
         modulus_factors: factors,
         mesh_level: EFFECT_MESH_LEVEL,
         steps: TRUTH_STEPS,
-        max_depth_mm: EFFECT_MAX_DEPTH_MM,
+        max_depth_mm: TRUTH_MAX_DEPTH_MM,
     };
     s
 }
