@@ -12,6 +12,8 @@
 //! Each test starts its own bench and daemon; the calibration is shared (made once per
 //! run by the daemon's own calibration routine). Experiments run in real time.
 
+#![allow(clippy::unwrap_used)] // tests may unwrap (COMMON.md)
+
 use std::time::{Duration, Instant};
 
 use host::daemon::api::{Event, ExperimentRequest, Job, JobState};
