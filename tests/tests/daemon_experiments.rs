@@ -236,7 +236,6 @@ fn emergency_stop_during_an_experiment_vents_and_stops_within_one_control_period
         .find(|w| {
             decoder
                 .push(&w.bytes)
-                .into_iter()
                 .flatten()
                 .any(|f| f.request == Request::Vent { open: true })
         })
