@@ -49,9 +49,9 @@ pub struct CurveArgs {
     #[arg(long, value_enum, default_value = "neo-hookean")]
     pub material: Material,
     /// Strain stiffening of the sample: Yeoh ratio c2/c1 (dimensionless, >= 0; default 0 =
-    /// neo-Hookean). The small-strain modulus stays --modulus; e.g. 2 stiffens the contact
-    /// response clearly at h = 1.7 mm.
-    #[arg(long)]
+    /// neo-Hookean). The small-strain modulus stays --modulus; e.g. 2-5 stiffens a soft
+    /// (E2 <= 50 kPa) sample's response clearly at h = 1.7 mm (stiff samples barely show it).
+    #[arg(long, allow_negative_numbers = true)]
     pub stiffening: Option<f64>,
     /// Final tube travel h in mm (default 2).
     #[arg(long)]
