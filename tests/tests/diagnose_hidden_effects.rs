@@ -20,10 +20,14 @@ fn tables() -> (
 ) {
     let effects: Vec<_> = EffectAxis::ALL
         .iter()
-        .map(|a| read_effect_table(&shipped_tables_dir().join(a.file_name())).unwrap())
+        .map(|a| {
+            read_effect_table(&shipped_tables_dir().join(a.file_name()))
+                .expect("diagnosis test setup")
+        })
         .collect();
     let t = &effects[0];
-    let base = sub_table(&t.lut, &t.axis.select(t.axis.base_value())).unwrap();
+    let base =
+        sub_table(&t.lut, &t.axis.select(t.axis.base_value())).expect("diagnosis test setup");
     (base, effects)
 }
 
@@ -36,14 +40,14 @@ fn check(kind: EffectKind, seed: u64) {
         seed,
         ..SimSpec::default()
     })
-    .unwrap();
+    .expect("diagnosis test setup");
     let options = DiagnoseOptions {
         bootstrap: 200,
         confidence_reruns: 0,
         seed,
         ..DiagnoseOptions::default()
     };
-    let d = diagnose(&base, &effects, points, &options).unwrap();
+    let d = diagnose(&base, &effects, points, &options).expect("diagnosis test setup");
     let named = d.effect.as_deref() == Some(kind.name())
         || d.ambiguity_group.iter().any(|g| g == kind.name());
     assert!(
@@ -55,11 +59,11 @@ fn check(kind: EffectKind, seed: u64) {
         d.ambiguity_group,
         host::diagnosis::report::text(&d)
     );
-    let shrink = d.gap_shrink.unwrap();
+    let shrink = d.gap_shrink.expect("diagnosis test setup");
     // at least 10 %: the gap must shrink; measured 1.14 (radius offset, whose structure is
     // small next to the noise model's table-error term) to 2.8 (thickness) on these cases
     assert!(shrink > 1.1, "{}: gap shrink {shrink}", kind.name());
-    let aug = d.augmented.unwrap();
+    let aug = d.augmented.expect("diagnosis test setup");
     assert!(aug.chi2_per_dof < d.baseline.chi2_per_dof);
 }
 

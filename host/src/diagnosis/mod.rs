@@ -203,6 +203,7 @@ struct SelectionRun {
     screened: Vec<Screened>,
 }
 
+#[allow(clippy::too_many_arguments)]
 fn run_selection(
     model: &Model<'_>,
     cands: &[Candidate],

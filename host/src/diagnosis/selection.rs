@@ -62,8 +62,11 @@ pub struct HeldOut {
     pub confirms: bool,
 }
 
+/// One held-out split: (fit on, predict) point indices.
+pub type Split = (Vec<usize>, Vec<usize>);
+
 /// The splits of the held-out check: (fit on, predict) pairs of point index sets.
-pub fn splits(points: &[Point], subset: &[usize]) -> (String, Vec<(Vec<usize>, Vec<usize>)>) {
+pub fn splits(points: &[Point], subset: &[usize]) -> (String, Vec<Split>) {
     let ps = super::data::pressures(points);
     let used_ps: Vec<f64> = ps
         .into_iter()
