@@ -83,7 +83,7 @@ fn camera_radius_offset_is_named_and_the_gap_shrinks() {
 }
 
 #[test]
-#[ignore = "about 1-2 min in release (friction solves); run with --release -- --ignored"]
+#[ignore = "minutes in release (friction solves); FAILS today at friction and pressure_offset (never named in the confusion matrix, README Diagnosis); run with --release -- --ignored"]
 fn every_effect_at_a_clear_size_is_named_and_the_gap_shrinks() {
     for (k, kind) in EffectKind::ALL.into_iter().enumerate() {
         check(kind, 100 + k as u64);
