@@ -131,8 +131,12 @@ fn move_and_collect(
                 progress.set_position((units.stage_mm(steps) * 1000.0).max(0.0) as u64);
             }
             if s.status.contains(StatusFlags::FAULT) {
+                // the fault report follows the flagged sample
+                let _ = link.pump(Duration::from_millis(100));
+                let latched = link.faults().last().map_or(0, |f| f.latched.0);
                 return Err(CalibrationError::Procedure(format!(
-                    "device fault during the sweep: flags {:#06x}",
+                    "device fault during the sweep: {} (status {:#06x})",
+                    fault_names(latched),
                     s.status.0
                 )));
             }
@@ -145,6 +149,29 @@ fn move_and_collect(
                 "the stage did not reach {target_mm:.3} mm"
             )));
         }
+    }
+}
+
+/// Names of latched fault flags (protocol::FaultFlags).
+pub fn fault_names(latched: u16) -> String {
+    use protocol::FaultFlags as F;
+    let names: Vec<&str> = [
+        (F::OVERPRESSURE, "overpressure"),
+        (F::MANOMETER_RANGE, "manometer out of range"),
+        (F::MANOMETER_STUCK, "manometer stuck"),
+        (F::HEARTBEAT_LOST, "heartbeat lost (no request for 1 s)"),
+        (F::LOAD_CELL_TIMEOUT, "load-cell timeout"),
+        (F::STAGE_LIMIT, "stage limit"),
+        (F::WATCHDOG_RESET, "watchdog reset"),
+    ]
+    .iter()
+    .filter(|(bit, _)| latched & bit != 0)
+    .map(|(_, n)| *n)
+    .collect();
+    if names.is_empty() {
+        "unknown fault (no fault report received)".into()
+    } else {
+        names.join(", ")
     }
 }
 
