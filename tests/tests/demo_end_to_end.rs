@@ -6,7 +6,8 @@
 //!
 //! One at a time: each run is two real-time benches plus fem-core solves; run in parallel
 //! on the shared 2-core machine (load average ~9) the simulated controller latched a fault
-//! during the rigid sweep in both of two runs, sequentially 0 of 8.
+//! during the rigid sweep in both of two runs; one at a time, once in ~15 runs (with a
+//! benchmark compiling alongside). Which fault is now named in the error.
 
 #![allow(clippy::unwrap_used)] // tests may unwrap (COMMON.md)
 
