@@ -71,7 +71,7 @@ pub fn latest_calibration(dir: &Path) -> Option<LoadedCalibration> {
 pub fn calibrate_sim(scenario: &hil_sim::scenario::Scenario, dir: &Path) -> Result<String, String> {
     use crate::calibration::RigidSampleCurve;
     use crate::experiment::simulated::{
-        DEMO_MAX_DEPTH_MM, DEMO_MESH_LEVEL, DEMO_STEPS, px_per_mm_from_reference_disc,
+        DEMO_MAX_DEPTH_MM, DEMO_RIGID_MESH_LEVEL, DEMO_STEPS, px_per_mm_from_reference_disc,
         rigid_calibration, rigid_scenario, start_and_connect,
     };
     let px = px_per_mm_from_reference_disc(scenario, &[1.2, 2.0, 2.8, 3.4])
@@ -80,10 +80,16 @@ pub fn calibrate_sim(scenario: &hil_sim::scenario::Scenario, dir: &Path) -> Resu
     let pressure = 6.0;
     let (bench, mut link) =
         start_and_connect(rigid_scenario(scenario, pressure)).map_err(|e| e.to_string())?;
-    // u_s(h) on the rigid sample from fem-core with the simulation's own solver settings
-    // (u_s = h would be wrong by up to 27 µm, about -2 % in E2 at 200 kPa).
-    let rigid = RigidSampleCurve::solve(pressure, DEMO_MESH_LEVEL, DEMO_STEPS, DEMO_MAX_DEPTH_MM)
-        .map_err(|e| format!("rigid-sample u_s(h): {e}"))?;
+    // u_s(h) on the rigid sample from fem-core with the simulated rigid sample's own solver
+    // settings (`rigid_scenario` solves at DEMO_RIGID_MESH_LEVEL; u_s = h would be wrong by up
+    // to 27 µm, about -2 % in E2 at 200 kPa).
+    let rigid = RigidSampleCurve::solve(
+        pressure,
+        DEMO_RIGID_MESH_LEVEL,
+        DEMO_STEPS,
+        DEMO_MAX_DEPTH_MM,
+    )
+    .map_err(|e| format!("rigid-sample u_s(h): {e}"))?;
     let (sweep, zero) = rigid_calibration(
         &mut link,
         pressure,
