@@ -29,6 +29,10 @@ enum Command {
     Fit(cli::fit::FitArgs),
     /// The whole measurement against the emulated bench: calibrate, measure, fit, record.
     Demo(cli::demo::DemoArgs),
+    /// Calibrate the bench: manometer zero, load tare, proximity sweep, camera px/mm.
+    Calibrate(cli::calibrate::CalibrateArgs),
+    /// One experiment on the bench: indent, pair frames with samples, fit, record.
+    Measure(cli::measure::MeasureArgs),
     /// Where the model and a measurement disagree, which effect explains it, the gap before and after.
     Diagnose(cli::diagnose::DiagnoseArgs),
     /// The bench daemon: owns the instrument, runs queued experiments, serves the HTTP API.
@@ -41,10 +45,6 @@ enum Command {
     Run(cli::run::RunArgs),
     /// Live dashboard of the daemon: pressure, a–u_s curve and fit, stream losses, faults.
     Watch(cli::watch::WatchArgs),
-    /// Calibrate the bench: manometer zero, load tare, proximity sweep, camera px/mm.
-    Calibrate(cli::calibrate::CalibrateArgs),
-    /// One experiment on the bench: indent, pair frames with samples, fit, record.
-    Measure(cli::measure::MeasureArgs),
 }
 
 fn main() -> ExitCode {
@@ -57,13 +57,13 @@ fn main() -> ExitCode {
         Command::Fem(args) => cli::fem::run(args),
         Command::Fit(args) => cli::fit::run(args),
         Command::Demo(args) => cli::demo::run(args),
+        Command::Calibrate(args) => cli::calibrate::run(args),
+        Command::Measure(args) => cli::measure::run(args),
         Command::Diagnose(args) => cli::diagnose::run(args),
         Command::Daemon(args) => cli::daemon::run(args),
         Command::Status(args) => cli::status::run(args),
         Command::Stop(args) => cli::stop::run(args),
         Command::Run(args) => cli::run::run(args),
         Command::Watch(args) => cli::watch::run(args),
-        Command::Calibrate(args) => cli::calibrate::run(args),
-        Command::Measure(args) => cli::measure::run(args),
     }
 }

@@ -12,6 +12,9 @@ use std::time::{Duration, Instant};
 use host::daemon::Client;
 use host::daemon::sim::start_sim_daemon;
 
+/// A refused-body case: path, body, extra headers, expected status.
+type BodyCase<'a> = (&'a str, &'a str, &'a [(&'a str, &'a str)], u16);
+
 fn temp_dir(name: &str) -> std::path::PathBuf {
     let d = std::env::temp_dir().join(format!("tactile-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);
@@ -103,7 +106,7 @@ fn refused_requests_change_nothing() {
     assert_eq!(raw_http(&addr, &req("127.0.0.1:1")), 403);
 
     // Malformed and invalid bodies.
-    let cases: &[(&str, &str, &[(&str, &str)], u16)] = &[
+    let cases: &[BodyCase<'_>] = &[
         ("/v1/pressure", "{\"kpa\": ", &[], 400),
         ("/v1/pressure", "not json", &[], 400),
         ("/v1/pressure", r#"{"kpa":"high"}"#, &[], 422),
