@@ -42,10 +42,25 @@ fn false_positives(seeds: u64) -> (usize, Vec<String>) {
         if d.verdict.as_str() != "none" {
             fp += 1;
             labels.push(format!(
-                "seed {seed}: {} {:?} (baseline chi2/dof {:.2})",
+                "seed {seed}: {} {:?} (baseline chi2/dof {:.2}; threshold {:.2}; {})",
                 d.verdict.as_str(),
                 d.effect,
-                d.baseline.chi2_per_dof
+                d.baseline.chi2_per_dof,
+                d.threshold.delta_chi2_95,
+                d.candidates
+                    .iter()
+                    .filter(|c| c.passes_threshold)
+                    .map(|c| format!(
+                        "{} d {:.1} held-out gain {:.1} margin {:.1}",
+                        c.label,
+                        c.delta_chi2.unwrap_or(f64::NAN),
+                        c.held_out
+                            .as_ref()
+                            .map_or(f64::NAN, |h| h.baseline_chi2 - h.candidate_chi2),
+                        c.held_out.as_ref().map_or(f64::NAN, |h| h.margin_chi2)
+                    ))
+                    .collect::<Vec<_>>()
+                    .join("; ")
             ));
         }
     }
@@ -63,7 +78,17 @@ fn clean_data_rarely_names_an_effect() {
 #[test]
 #[ignore = "100 diagnoses, a few minutes in release; run with --release -- --ignored --nocapture"]
 fn false_positive_rate_over_100_seeds_is_at_most_5_percent() {
-    let (fp, labels) = false_positives(100);
-    println!("false positives: {fp} of 100: {labels:?}");
-    assert!(fp <= 5, "{fp} of 100 false positives: {labels:?}");
+    let seeds: u64 = std::env::var("NULL_SEEDS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(100);
+    let (fp, labels) = false_positives(seeds);
+    println!("false positives: {fp} of {seeds}:");
+    for l in &labels {
+        println!("  {l}");
+    }
+    assert!(
+        seeds >= 100 && fp * 20 <= seeds as usize,
+        "{fp} of {seeds} false positives (the check needs >= 100 seeds)"
+    );
 }

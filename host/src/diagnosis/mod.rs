@@ -327,6 +327,29 @@ pub fn diagnose(
                 f.modulus_kpa,
                 f.theta,
             );
+            if s.passes_threshold
+                && let Some(h) = s.held_out.as_mut()
+                && h.confirms
+            {
+                // calibrated margin: without it any improvement confirmed (selection.rs)
+                match selection::held_out_margin(
+                    &model,
+                    &s.candidate,
+                    &points,
+                    &subset,
+                    &whitener,
+                    &base_fit,
+                    f.theta,
+                    selection::HELD_OUT_DRAWS,
+                    options.seed ^ 0x4e1d,
+                ) {
+                    Some(m) => {
+                        h.margin_chi2 = m.max(0.0);
+                        h.confirms = h.baseline_chi2 - h.candidate_chi2 > h.margin_chi2;
+                    }
+                    None => h.confirms = false,
+                }
+            }
         }
     }
     let ambiguity_pairs = signatures::ambiguous_pairs(&sigs);

@@ -128,9 +128,10 @@ pub fn text(d: &Diagnosis) -> String {
             c.aic.map_or("-".into(), |v| format!("{v:.1}")),
             c.bic.map_or("-".into(), |v| format!("{v:.1}")),
             c.held_out.as_ref().map_or("-".into(), |h| format!(
-                "{:.1} vs baseline {:.1}{}",
+                "{:.1} vs baseline {:.1} (margin {:.1}){}",
                 h.candidate_chi2,
                 h.baseline_chi2,
+                h.margin_chi2,
                 if h.confirms {
                     " (confirms)"
                 } else {
