@@ -3,8 +3,10 @@
 //! runs 12 seeds and allows 2 (if the true rate were 5 %, P(>= 3 of 12) = 2 %); the full
 //! check (>= 100 seeds, <= 5 %) is
 //! `cargo test --release -p system-tests --test diagnose_null -- --ignored --nocapture`.
-//! Both currently FAIL (measured 33 of 100 seeds; README, Diagnosis), so both are
-//! `#[ignore]`d to keep CI green.
+//! Both currently FAIL (measured 28 of 100 seeds with the calibrated held-out margin, 33
+//! before it; README, Diagnosis), so both are `#[ignore]`d to keep CI green.
+//! `NULL_SEEDS=N` runs the long check on fewer seeds (it then reports and fails, since the
+//! criterion needs >= 100).
 
 use host::diagnosis::simulate::{SimSpec, simulate_with, truth_mechanics, truth_scenario};
 use host::diagnosis::tables::{EffectAxis, read_effect_table, shipped_tables_dir, sub_table};
@@ -68,7 +70,7 @@ fn false_positives(seeds: u64) -> (usize, Vec<String>) {
 }
 
 #[test]
-#[ignore = "FAILS today: the measured false-positive rate is far above 5 % (README Diagnosis); \
+#[ignore = "FAILS today: the measured false-positive rate is 28 of 100 seeds, target <= 5 % (README Diagnosis); \
             kept out of the default suite so CI stays green, run with --ignored"]
 fn clean_data_rarely_names_an_effect() {
     let (fp, labels) = false_positives(12);
@@ -76,7 +78,7 @@ fn clean_data_rarely_names_an_effect() {
 }
 
 #[test]
-#[ignore = "100 diagnoses, a few minutes in release; run with --release -- --ignored --nocapture"]
+#[ignore = "FAILS today (28 of 100 seeds, README Diagnosis); 100 diagnoses, 481 s in debug; run with --release -- --ignored --nocapture"]
 fn false_positive_rate_over_100_seeds_is_at_most_5_percent() {
     let seeds: u64 = std::env::var("NULL_SEEDS")
         .ok()
