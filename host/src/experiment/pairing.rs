@@ -3,6 +3,11 @@
 //! bracketing samples (their device times mapped to host time by the link's clock fit);
 //! frames outside the sampled interval, or next to a gap longer than `max_gap_us`, are left
 //! unpaired. Load and unload are split at the deepest stage position.
+//!
+//! A frame whose contact radius is not finite or exceeds the shell's outer radius R1 is a
+//! vision failure, not a measurement: the contact patch lies on the hemisphere, so
+//! a <= R1 (the paper's contacts reach about 3.5 mm). Such frames stay in `frames.csv` (the
+//! record keeps everything) but are left out of the curve, with a warning.
 
 use crate::curve_csv::Phase;
 
@@ -52,7 +57,12 @@ pub fn pair_frames(
         .unwrap_or(f64::INFINITY);
     let mut out = Vec::with_capacity(frames.len());
     let mut k = 0usize;
+    let mut impossible = 0usize;
     for f in frames {
+        if !is_possible_contact_radius(f.a_mm) {
+            impossible += 1;
+            continue;
+        }
         let t = f.host_time_us;
         while k + 1 < samples.len() && samples[k + 1].host_time_us < t {
             k += 1;
@@ -87,12 +97,52 @@ pub fn pair_frames(
             },
         });
     }
+    if impossible > 0 {
+        tracing::warn!(
+            frames = impossible,
+            "contact radius above the shell's outer radius ({} mm) or not finite: frames kept \
+             in frames.csv, left out of the curve",
+            fem_core::problem::SHELL_OUTER_RADIUS_MM
+        );
+    }
     out
+}
+
+/// Whether a measured contact radius can be a contact on the shell: finite, >= 0 and at most
+/// the hemisphere's outer radius R1.
+pub fn is_possible_contact_radius(a_mm: f64) -> bool {
+    a_mm.is_finite() && (0.0..=fem_core::problem::SHELL_OUTER_RADIUS_MM).contains(&a_mm)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn radii_beyond_the_shell_are_left_out() {
+        // a 16.4 mm "contact" was seen once in a demo run: a vision failure, since the patch
+        // lies on the 5 mm hemisphere
+        let samples: Vec<DisplacementSample> = (0..=100)
+            .map(|k| DisplacementSample {
+                host_time_us: k as f64 * 1000.0,
+                u_s_mm: k as f64 * 0.01,
+                stage_mm: k as f64 * 0.01,
+                load_n: None,
+                p_air_kpa: 6.0,
+            })
+            .collect();
+        let frames: Vec<RadiusSample> = [1.0, 16.4, f64::NAN, 2.0, 5.0]
+            .iter()
+            .enumerate()
+            .map(|(i, &a_mm)| RadiusSample {
+                host_time_us: 500.0 + i as f64 * 10_000.0,
+                a_mm,
+            })
+            .collect();
+        let pts = pair_frames(&samples, &frames, 5000.0, 0.0);
+        let kept: Vec<f64> = pts.iter().map(|p| p.a_mm).collect();
+        assert_eq!(kept, vec![1.0, 2.0, 5.0]);
+    }
 
     #[test]
     fn interpolates_u_s_at_frame_times_and_splits_phases() {
