@@ -59,17 +59,13 @@ pub fn run(args: DemoArgs) -> ExitCode {
             if args.json {
                 println!("{}", serde_json::to_string(&report).unwrap_or_default());
             } else {
-                println!(
-                    "E2 = {:.1} kPa (95 % CI {:.1} .. {:.1} kPa), residual RMS {:.4} mm",
+                super::print_modulus_summary(
                     report.modulus_kpa,
-                    report.ci95_kpa[0],
-                    report.ci95_kpa[1],
-                    report.rms_residual_mm
+                    report.ci95_kpa,
+                    report.rms_residual_mm,
+                    &report.record_dir,
+                    &report.notes,
                 );
-                println!("record: {}", report.record_dir);
-                for note in &report.notes {
-                    println!("note: {note}");
-                }
             }
             if report.partial {
                 ExitCode::from(1)
