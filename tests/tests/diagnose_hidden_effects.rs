@@ -59,12 +59,28 @@ fn check(kind: EffectKind, seed: u64) {
         d.ambiguity_group,
         host::diagnosis::report::text(&d)
     );
+    // the gap must shrink, beyond chance: the chi^2 improvement exceeds the bootstrap
+    // threshold (the 95th percentile of the largest improvement any candidate gets on data
+    // without an effect) and the held-out points are predicted better. (chi^2 per dof falls
+    // by only 3-10 % for the small measurement effects, because it is dominated by the
+    // noise model's table-error term, so a fixed shrink factor is not the criterion.)
     let shrink = d.gap_shrink.expect("diagnosis test setup");
-    // at least 10 %: the gap must shrink; measured 1.14 (radius offset, whose structure is
-    // small next to the noise model's table-error term) to 2.8 (thickness) on these cases
-    assert!(shrink > 1.1, "{}: gap shrink {shrink}", kind.name());
+    assert!(shrink > 1.0, "{}: gap shrink {shrink}", kind.name());
     let aug = d.augmented.expect("diagnosis test setup");
-    assert!(aug.chi2_per_dof < d.baseline.chi2_per_dof);
+    assert!(
+        d.baseline.chi2 - aug.chi2 > d.threshold.delta_chi2_95,
+        "{}: chi2 {} -> {}, threshold {}",
+        kind.name(),
+        d.baseline.chi2,
+        aug.chi2,
+        d.threshold.delta_chi2_95
+    );
+    if let (Some(b), Some(a)) = (
+        d.baseline.held_out_chi2_per_point,
+        aug.held_out_chi2_per_point,
+    ) {
+        assert!(a < b, "{}: held-out chi2/point {b} -> {a}", kind.name());
+    }
 }
 
 #[test]

@@ -212,6 +212,51 @@ impl<'a> Model<'a> {
         (cubic - chord).abs()
     }
 
+    /// The u_s of each load step of a curve at (E2, p_air): the step u_s of the two modulus
+    /// nodes around E2 interpolated linearly in ln E2, at the pressure node nearest to p_air
+    /// (the strictly increasing run). A curve solved at E2 has its element-scale structure
+    /// pinned to these knots (it is read between steps by chords), so the table-error term of
+    /// the noise model lives on them.
+    pub fn step_knots_mm(&self, e: f64, p: f64) -> Vec<f64> {
+        let g = &self.base_lut.grid;
+        let m = &g.modulus_kpa;
+        if m.len() < 2 || g.pressure_kpa.is_empty() {
+            return Vec::new();
+        }
+        let x = e.clamp(m[0], m[m.len() - 1]).ln();
+        let k = m.partition_point(|v| v.ln() <= x).clamp(1, m.len() - 1) - 1;
+        let w = (x - m[k].ln()) / (m[k + 1].ln() - m[k].ln());
+        let kp = (0..g.pressure_kpa.len())
+            .min_by(|&a, &b| {
+                (g.pressure_kpa[a] - p)
+                    .abs()
+                    .total_cmp(&(g.pressure_kpa[b] - p).abs())
+            })
+            .unwrap_or(0);
+        let curve = |modulus: usize| {
+            self.base_lut.curve(g.flat_index(fem_core::lut::GridIndex {
+                stiffening: 0,
+                material: 0,
+                friction: 0,
+                thickness: 0,
+                pressure: kp,
+                modulus,
+            }))
+        };
+        let (Some(c0), Some(c1)) = (curve(k), curve(k + 1)) else {
+            return Vec::new();
+        };
+        let n = c0.u_s_mm.len().min(c1.u_s_mm.len());
+        let mut out: Vec<f64> = Vec::with_capacity(n);
+        for j in 0..n {
+            let u = (1.0 - w) * c0.u_s_mm[j] + w * c1.u_s_mm[j];
+            if out.last().is_none_or(|&l| u > l) {
+                out.push(u);
+            }
+        }
+        out
+    }
+
     /// d a / d u_s of the baseline (central difference), for the u_s-offset noise term.
     pub fn slope_da_du(&self, e: f64, p: f64, u: f64) -> f64 {
         let h = 0.01;

@@ -21,10 +21,19 @@
 //! white + AR(1) noise are rho_1 = f phi and rho_2 = f phi^2 (f the AR share of the
 //! variance), so phi = rho_2 / rho_1 and f = rho_1 / phi; l = -median(du_s) / ln phi.
 //! The table's own interpolation error is added as a term common to all replicates at a
-//! pressure: sigma_L(u_s) from leave-one-out PCHIP across the modulus nodes next to the
-//! estimate, divided by 2 (calibrated on noise-free simulated data, see
-//! `LUT_ERROR_DIVISOR`), and along u_s |PCHIP - chord| through the table's steps
-//! ([`Model::u_interpolation_error_mm`]), with correlation exp(-|du_s| / 0.2 mm).
+//! pressure. Across E2 it is element-scale structure: a curve solved at an off-grid modulus
+//! wiggles about the table's interpolant with a sign that alternates from one load step to
+//! the next (measured: `tests/tests/diagnose_table_error.rs`), so it is modelled as
+//! independent errors e_k at the load-step knots u_k of a curve at the estimate
+//! ([`Model::step_knots_mm`]), joined by chords between knots (as the curve is read between
+//! steps): e(u_s) = sum_k h_k(u_s) e_k with hat functions h_k, covariance
+//! sum_k h_k(u_i) h_k(u_j) sigma_k^2. sigma_k is the leave-one-out PCHIP error across the
+//! modulus nodes next to the estimate at u_k, scaled by `LUT_ERROR_SCALE` (calibrated
+//! against direct solves between the nodes). Along u_s the table's PCHIP differs from the
+//! chord through the steps by |PCHIP - chord| ([`Model::u_interpolation_error_mm`]), a
+//! term fully correlated within one step interval and independent between intervals.
+//! A smooth (exponential) correlation for these terms would make the alternating structure
+//! look impossible and amplify it in the whitened residuals.
 //!
 //! Without replicates at a pressure the model is assumed: white noise from the first
 //! differences of the residuals (Rice 1984: sigma^2 = sum (r_(i+1) - r_i)^2 / (2 (n - 1))),
@@ -36,14 +45,16 @@ use super::data::Point;
 use super::linalg;
 use super::model::Model;
 
-/// Leave-one-out error over the interpolation error at the query: 8 for a smooth PCHIP
-/// (O(h^3), spacing doubled), but mesh level -2 curves carry element-scale bumps in a(u_s)
-/// that interpolation across E2 does not follow; 2 matches the truth-vs-table mismatch
-/// measured on noise-free hil-sim data (RMS 8 um at 170 kPa, against LOO/8 = 1.6 um).
-const LUT_ERROR_DIVISOR: f64 = 2.0;
-/// Correlation length of the table-interpolation term (mm of u_s; the bumps follow the
-/// mesh).
-const LUT_CORRELATION_MM: f64 = 0.2;
+/// Interpolation error at a query over the leave-one-out error at the nearest node (both
+/// RMS over load steps): for a smooth PCHIP it would be ~1/8 (O(h^3), spacing doubled), but
+/// mesh level -2 curves carry element-scale wiggles in a(u_s) whose phase changes with E2,
+/// which interpolation does not follow at any spacing. Calibrated by direct solves at the
+/// geometric midpoints between the table's modulus nodes 14.7-681 kPa at 6 and 15 kPa
+/// (`tests/tests/diagnose_table_error.rs`, `loo_calibration`): pooled RMS ratio 0.82
+/// (0.54-1.14 per curve below 200 kPa, 0.1-0.3 above 250 kPa, where the term is then
+/// conservative but small); mean squared standardised error 1 at 0.85. The truth-minus-table
+/// differences alternate in sign from step to step (lag-1 correlation -0.39).
+pub const LUT_ERROR_SCALE: f64 = 0.85;
 
 /// Noise parameters at one pressure.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -73,8 +84,10 @@ pub struct NoiseModel {
     pub pressures: Vec<PressureNoise>,
     /// da/du_s of the baseline at each point.
     slope: Vec<f64>,
-    /// Table-interpolation standard deviation at each point.
-    lut_sigma: Vec<f64>,
+    /// Table-error term at each point.
+    lut: Vec<LutTerm>,
+    /// Knot standard deviations of the table error across E2, per pressure.
+    knot_sigma: Vec<(f64, Vec<f64>)>,
 }
 
 fn bins_of(us: &[f64], k: usize) -> Vec<usize> {
@@ -86,9 +99,10 @@ fn bins_of(us: &[f64], k: usize) -> Vec<usize> {
         .collect()
 }
 
-/// Table-interpolation error at one point: leave-one-out PCHIP at the modulus node nearest
-/// to `e`, over the nodes that reach u_s.
-fn lut_sigma(model: &Model<'_>, e: f64, p: f64, u: f64) -> f64 {
+/// Leave-one-out interpolation error of the baseline table at u_s: PCHIP across ln E2 at the
+/// modulus node nearest to `e` from its neighbours (two on each side where they reach u_s)
+/// minus the node's own value, in absolute value (mm; 0 where it cannot be formed).
+pub fn lut_loo_error_mm(model: &Model<'_>, e: f64, p: f64, u: f64) -> f64 {
     let nodes = model.base.moduli_kpa();
     let n = nodes.len();
     if n < 4 {
@@ -127,7 +141,78 @@ fn lut_sigma(model: &Model<'_>, e: f64, p: f64, u: f64) -> f64 {
         .collect();
     let (pred, _) = fem_core::lut::pchip::eval(&xs, &ys, nodes[k].ln());
     let truth = model.base.sample(nodes[k], p, u).a_mm;
-    (pred - truth).abs() / LUT_ERROR_DIVISOR
+    (pred - truth).abs()
+}
+
+/// Load-step knots of a curve at (E2, p_air) ([`Model::step_knots_mm`]) and, at each, the
+/// leave-one-out error of the table ([`lut_loo_error_mm`]) as an RMS over the knot and its
+/// two neighbours on each side: the pointwise |LOO| passes through zero where the wiggle
+/// does, not where the error is small.
+pub fn table_error_knots(model: &Model<'_>, e: f64, p: f64) -> (Vec<f64>, Vec<f64>) {
+    let u = model.step_knots_mm(e, p);
+    let loo: Vec<f64> = u
+        .iter()
+        .map(|&uk| lut_loo_error_mm(model, e, p, uk))
+        .collect();
+    let n = loo.len();
+    let rms = (0..n)
+        .map(|k| {
+            let w = &loo[k.saturating_sub(2)..(k + 3).min(n)];
+            (w.iter().map(|v| v * v).sum::<f64>() / w.len() as f64).sqrt()
+        })
+        .collect();
+    (u, rms)
+}
+
+/// The table-error term at one point: the two load-step knots around it with their hat
+/// weights, and the along-u_s term with its step interval.
+#[derive(Debug, Clone, Copy)]
+struct LutTerm {
+    knots: [(usize, f64); 2],
+    interval: usize,
+    along_u_mm: f64,
+}
+
+/// Table-error terms of `points` at modulus `e`; knot standard deviations per pressure.
+fn lut_terms(model: &Model<'_>, points: &[Point], e: f64) -> (Vec<LutTerm>, Vec<(f64, Vec<f64>)>) {
+    let mut knots_at: Vec<(f64, Vec<f64>, Vec<f64>)> = Vec::new();
+    for p in super::data::pressures(points) {
+        let (u, loo) = table_error_knots(model, e, p);
+        let sigma = loo.iter().map(|l| LUT_ERROR_SCALE * l).collect();
+        knots_at.push((p, u, sigma));
+    }
+    let terms = points
+        .iter()
+        .map(|pt| {
+            let along_u_mm = model.u_interpolation_error_mm(e, pt.p_air_kpa, pt.u_s_mm);
+            let Some((_, u, _)) = knots_at.iter().find(|k| k.0 == pt.p_air_kpa) else {
+                return LutTerm {
+                    knots: [(0, 0.0), (0, 0.0)],
+                    interval: usize::MAX,
+                    along_u_mm,
+                };
+            };
+            let n = u.len();
+            if n < 2 {
+                return LutTerm {
+                    knots: [(0, 0.0), (0, 0.0)],
+                    interval: usize::MAX,
+                    along_u_mm,
+                };
+            }
+            let j = u.partition_point(|&x| x <= pt.u_s_mm).clamp(1, n - 1) - 1;
+            let w = ((pt.u_s_mm - u[j]) / (u[j + 1] - u[j])).clamp(0.0, 1.0);
+            LutTerm {
+                knots: [(j, 1.0 - w), (j + 1, w)],
+                interval: j,
+                along_u_mm,
+            }
+        })
+        .collect();
+    (
+        terms,
+        knots_at.into_iter().map(|(p, _, s)| (p, s)).collect(),
+    )
 }
 
 impl NoiseModel {
@@ -138,22 +223,23 @@ impl NoiseModel {
             .iter()
             .map(|p| model.slope_da_du(e, p.p_air_kpa, p.u_s_mm))
             .collect();
-        let lut: Vec<f64> = points
-            .iter()
-            .map(|p| {
-                let along_e = lut_sigma(model, e, p.p_air_kpa, p.u_s_mm);
-                let along_u = model.u_interpolation_error_mm(e, p.p_air_kpa, p.u_s_mm);
-                (along_e * along_e + along_u * along_u).sqrt()
-            })
-            .collect();
+        let (lut, knot_sigma) = lut_terms(model, points, e);
         let mut pressures = Vec::new();
         for p in super::data::pressures(points) {
             let idx: Vec<usize> = (0..points.len())
                 .filter(|&i| points[i].p_air_kpa == p)
                 .collect();
             let tests = super::data::tests_at(points, p);
-            let lut_rms =
-                (idx.iter().map(|&i| lut[i] * lut[i]).sum::<f64>() / idx.len() as f64).sqrt();
+            let ks = knot_sigma
+                .iter()
+                .find(|k| k.0 == p)
+                .map_or(&[][..], |k| &k.1[..]);
+            let lut_rms = (idx
+                .iter()
+                .map(|&i| lut_covariance(&lut[i], &lut[i], ks, true))
+                .sum::<f64>()
+                / idx.len() as f64)
+                .sqrt();
             let pn = if tests.len() >= 2 {
                 estimate_with_replicates(points, r, &slope, &idx, &tests, p)
             } else {
@@ -167,7 +253,8 @@ impl NoiseModel {
         Self {
             pressures,
             slope,
-            lut_sigma: lut,
+            lut,
+            knot_sigma,
         }
     }
 
@@ -189,7 +276,12 @@ impl NoiseModel {
             return 0.0;
         };
         let du = (a.u_s_mm - b.u_s_mm).abs();
-        let mut c = self.lut_sigma[i] * self.lut_sigma[j] * (-du / LUT_CORRELATION_MM).exp();
+        let ks = self
+            .knot_sigma
+            .iter()
+            .find(|k| k.0 == a.p_air_kpa)
+            .map_or(&[][..], |k| &k.1[..]);
+        let mut c = lut_covariance(&self.lut[i], &self.lut[j], ks, false);
         if a.test == b.test {
             c += n.test_offset_a_mm.powi(2)
                 + n.test_offset_u_mm.powi(2) * self.slope[i] * self.slope[j]
@@ -299,6 +391,24 @@ impl Whitener {
         }
         out
     }
+}
+
+/// Covariance of the table-error terms of two points at one pressure (knot sigmas `ks`).
+fn lut_covariance(a: &LutTerm, b: &LutTerm, ks: &[f64], same: bool) -> f64 {
+    let mut c = 0.0;
+    for &(ka, wa) in &a.knots {
+        for &(kb, wb) in &b.knots {
+            if ka == kb
+                && let Some(s) = ks.get(ka)
+            {
+                c += wa * wb * s * s;
+            }
+        }
+    }
+    if same || (a.interval == b.interval && a.interval != usize::MAX) {
+        c += a.along_u_mm * b.along_u_mm;
+    }
+    c
 }
 
 fn mean(v: &[f64]) -> f64 {
