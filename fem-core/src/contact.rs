@@ -464,8 +464,13 @@ impl ContactPair {
         })
     }
 
-    /// Active contact terms at the current configuration.
-    pub fn active_terms(&self, position: &dyn Fn(usize) -> [f64; 2]) -> Vec<ContactTerm> {
+    /// Active contact terms at the current configuration; their tangents are left empty
+    /// unless `with_tangent` (the residuals are the same numbers either way).
+    pub fn active_terms(
+        &self,
+        position: &dyn Fn(usize) -> [f64; 2],
+        with_tangent: bool,
+    ) -> Vec<ContactTerm> {
         let mut terms = Vec::new();
         for (s, &slave) in self.slaves.iter().enumerate() {
             let xs = position(slave);
@@ -486,26 +491,35 @@ impl ContactPair {
                 continue;
             }
             let n = grad.len();
-            let hess = self
-                .gap_hessian(seg, xs, &coords)
-                .unwrap_or_else(|| vec![0.0; n * n]);
             let residual: Vec<f64> = grad.iter().map(|d| -force * d).collect();
-            let mut tangent = vec![0.0; n * n];
-            for a in 0..n {
-                for b in 0..n {
-                    tangent[a * n + b] =
-                        stiff * slope * grad[a] * grad[b] - force * hess[a * n + b];
+            let mut tangent = Vec::new();
+            if with_tangent {
+                let hess = self
+                    .gap_hessian(seg, xs, &coords)
+                    .unwrap_or_else(|| vec![0.0; n * n]);
+                tangent = vec![0.0; n * n];
+                for a in 0..n {
+                    for b in 0..n {
+                        tangent[a * n + b] =
+                            stiff * slope * grad[a] * grad[b] - force * hess[a * n + b];
+                    }
                 }
             }
             let mut residual = residual;
-            if self.friction > 0.0
-                && let Some((rf, kf)) = self.friction_term(s, e, seg, xs, &coords)
-            {
-                for (r, v) in residual.iter_mut().zip(&rf) {
-                    *r += v;
-                }
-                for (t, v) in tangent.iter_mut().zip(&kf) {
-                    *t += v;
+            if self.friction > 0.0 {
+                if with_tangent {
+                    if let Some((rf, kf)) = self.friction_term(s, e, seg, xs, &coords) {
+                        for (r, v) in residual.iter_mut().zip(&rf) {
+                            *r += v;
+                        }
+                        for (t, v) in tangent.iter_mut().zip(&kf) {
+                            *t += v;
+                        }
+                    }
+                } else if let Some(rf) = self.friction_residual(s, e, seg, xs, &coords) {
+                    for (r, v) in residual.iter_mut().zip(&rf) {
+                        *r += v;
+                    }
                 }
             }
             let mut nodes = vec![slave];
@@ -570,7 +584,7 @@ impl ContactPair {
 
     /// Largest penetration (mm) of the nodes that currently carry a contact force.
     pub fn max_penetration(&self, position: &dyn Fn(usize) -> [f64; 2]) -> f64 {
-        self.active_terms(position)
+        self.active_terms(position, false)
             .iter()
             .map(|t| -t.gap_mm)
             .fold(0.0, f64::max)

@@ -19,7 +19,7 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::material::{Material, respond};
+use crate::material::{Material, respond_with, theta};
 use crate::shape::{GAUSS3_POINTS, GAUSS3_WEIGHTS, q9};
 
 /// Number of displacement unknowns of one element.
@@ -27,7 +27,6 @@ pub const ELEMENT_DOFS: usize = 18;
 
 pub type ElementVector = SVector<f64, ELEMENT_DOFS>;
 pub type ElementMatrix = SMatrix<f64, ELEMENT_DOFS, ELEMENT_DOFS>;
-type Gradient = SMatrix<f64, 5, ELEMENT_DOFS>;
 
 /// How the volumetric part is discretised.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -50,9 +49,14 @@ pub struct ElementResult {
     pub mean_pressure_kpa: f64,
 }
 
-/// Integration-point geometry: gradient operator, weight and shape values.
+/// Integration-point geometry of the reference configuration. The gradient operator
+/// `G` (H = G u_e) is stored by its non-zero entries: per node `a`, `dN_a/dR` (rows dR of
+/// u_r and of u_z), `dN_a/dZ` (rows dZ) and `N_a / R` (the hoop row, u_r only).
+#[derive(Debug, Clone, Copy)]
 struct PointGeometry {
-    g: Gradient,
+    d_dr: [f64; 9],
+    d_dz: [f64; 9],
+    n_over_r: [f64; 9],
     weight: f64,
     np: [f64; 3],
 }
@@ -78,32 +82,74 @@ fn point_geometry(x_ref: &[[f64; 2]; 9], xi: f64, eta: f64, w: f64) -> Option<Po
         [jac[1][1] / det, -jac[0][1] / det],
         [-jac[1][0] / det, jac[0][0] / det],
     ];
-    let mut g = Gradient::zeros();
-    for a in 0..9 {
-        let dr = inv[0][0] * dn[a][0] + inv[1][0] * dn[a][1];
-        let dz = inv[0][1] * dn[a][0] + inv[1][1] * dn[a][1];
-        g[(0, 2 * a)] = dr;
-        g[(1, 2 * a)] = dz;
-        g[(2, 2 * a + 1)] = dr;
-        g[(3, 2 * a + 1)] = dz;
-        g[(4, 2 * a)] = n[a] / radius;
-    }
-    Some(PointGeometry {
-        g,
+    let mut pt = PointGeometry {
+        d_dr: [0.0; 9],
+        d_dz: [0.0; 9],
+        n_over_r: [0.0; 9],
         weight: 2.0 * std::f64::consts::PI * radius * det * w,
         np: [1.0, xi, eta],
-    })
+    };
+    for a in 0..9 {
+        pt.d_dr[a] = inv[0][0] * dn[a][0] + inv[1][0] * dn[a][1];
+        pt.d_dz[a] = inv[0][1] * dn[a][0] + inv[1][1] * dn[a][1];
+        pt.n_over_r[a] = n[a] / radius;
+    }
+    Some(pt)
 }
 
 impl PointGeometry {
-    /// Placeholder for the unreachable case of a missing point (every point is `Some`
-    /// once the loop above has not returned `None`).
-    fn empty() -> Self {
-        Self {
-            g: Gradient::zeros(),
-            weight: 0.0,
-            np: [0.0; 3],
+    /// `H = G u`: [du_r/dR, du_r/dZ, du_z/dR, du_z/dZ, u_r/R].
+    fn gradient(&self, u: &ElementVector) -> [f64; 5] {
+        let mut h = [0.0; 5];
+        for a in 0..9 {
+            let (ur, uz) = (u[2 * a], u[2 * a + 1]);
+            h[0] += self.d_dr[a] * ur;
+            h[1] += self.d_dz[a] * ur;
+            h[2] += self.d_dr[a] * uz;
+            h[3] += self.d_dz[a] * uz;
+            h[4] += self.n_over_r[a] * ur;
         }
+        h
+    }
+
+    /// `G^T s` (an element vector) for a 5-component stress-like `s`.
+    fn transpose_times(&self, s: &[f64; 5]) -> ElementVector {
+        let mut out = ElementVector::zeros();
+        for a in 0..9 {
+            out[2 * a] = self.d_dr[a] * s[0] + self.d_dz[a] * s[1] + self.n_over_r[a] * s[4];
+            out[2 * a + 1] = self.d_dr[a] * s[2] + self.d_dz[a] * s[3];
+        }
+        out
+    }
+}
+
+/// The reference-configuration geometry of one element at its 3 x 3 Gauss points
+/// (total-Lagrangian: it never changes, so a model computes it once per element).
+#[derive(Debug, Clone)]
+pub struct ElementGeometry {
+    points: [PointGeometry; 9],
+}
+
+impl ElementGeometry {
+    /// `None` if the reference element is degenerate (det J <= 0) or touches R <= 0 at a
+    /// Gauss point.
+    pub fn new(x_ref: &[[f64; 2]; 9]) -> Option<Self> {
+        let mut points = [None; 9];
+        for (j, &eta) in GAUSS3_POINTS.iter().enumerate() {
+            for (i, &xi) in GAUSS3_POINTS.iter().enumerate() {
+                points[3 * j + i] = Some(point_geometry(
+                    x_ref,
+                    xi,
+                    eta,
+                    GAUSS3_WEIGHTS[i] * GAUSS3_WEIGHTS[j],
+                )?);
+            }
+        }
+        let mut out = [points[0]?; 9];
+        for (o, p) in out.iter_mut().zip(points) {
+            *o = p?;
+        }
+        Some(Self { points: out })
     }
 }
 
@@ -120,12 +166,8 @@ fn add_gt_a_g(k: &mut ElementMatrix, pt: &PointGeometry, a: &[[f64; 5]; 5]) {
     let mut gr = [[0.0; 3]; 9];
     let mut gz = [[0.0; 2]; 9];
     for n in 0..9 {
-        for (m, &row) in R_ROWS.iter().enumerate() {
-            gr[n][m] = pt.g[(row, 2 * n)];
-        }
-        for (m, &row) in Z_ROWS.iter().enumerate() {
-            gz[n][m] = pt.g[(row, 2 * n + 1)];
-        }
+        gr[n] = [pt.d_dr[n], pt.d_dz[n], pt.n_over_r[n]];
+        gz[n] = [pt.d_dr[n], pt.d_dz[n]];
         for i in 0..5 {
             let mut vr = 0.0;
             for (m, &row) in R_ROWS.iter().enumerate() {
@@ -166,22 +208,33 @@ pub fn evaluate(
     mat: &Material,
     formulation: Formulation,
 ) -> Option<ElementResult> {
-    let mut points: [Option<PointGeometry>; 9] = Default::default();
-    for (j, &eta) in GAUSS3_POINTS.iter().enumerate() {
-        for (i, &xi) in GAUSS3_POINTS.iter().enumerate() {
-            points[3 * j + i] = Some(point_geometry(
-                x_ref,
-                xi,
-                eta,
-                GAUSS3_WEIGHTS[i] * GAUSS3_WEIGHTS[j],
-            )?);
-        }
-    }
-    let points = points.map(|p| p.unwrap_or_else(PointGeometry::empty));
-    let grads: [[f64; 5]; 9] = std::array::from_fn(|q| {
-        let h = points[q].g * u;
-        [h[0], h[1], h[2], h[3], h[4]]
-    });
+    evaluate_with(x_ref, u, mat, formulation, true)
+}
+
+/// [`evaluate`], computing the tangent only if `with_tangent` (otherwise it is zero; the
+/// residual, Jacobian and pressure are the same numbers either way).
+pub fn evaluate_with(
+    x_ref: &[[f64; 2]; 9],
+    u: &ElementVector,
+    mat: &Material,
+    formulation: Formulation,
+    with_tangent: bool,
+) -> Option<ElementResult> {
+    let geometry = ElementGeometry::new(x_ref)?;
+    evaluate_geometry(&geometry, u, mat, formulation, with_tangent)
+}
+
+/// [`evaluate_with`] for a precomputed reference geometry (`None` only for a degenerate
+/// pressure mass matrix).
+pub fn evaluate_geometry(
+    geometry: &ElementGeometry,
+    u: &ElementVector,
+    mat: &Material,
+    formulation: Formulation,
+    with_tangent: bool,
+) -> Option<ElementResult> {
+    let points = &geometry.points;
+    let grads: [[f64; 5]; 9] = std::array::from_fn(|q| points[q].gradient(u));
 
     let mut residual = ElementVector::zeros();
     let mut tangent = ElementMatrix::zeros();
@@ -195,10 +248,9 @@ pub fn evaluate(
             let mut mass = SMatrix::<f64, 3, 3>::zeros();
             let mut theta_moment = SVector::<f64, 3>::zeros();
             for (pt, h) in points.iter().zip(&grads) {
-                let r0 = respond(mat, h, 0.0);
                 let np = SVector::<f64, 3>::from(pt.np);
                 mass += np * np.transpose() * pt.weight;
-                theta_moment += np * (r0.theta * pt.weight);
+                theta_moment += np * (theta(mat, h) * pt.weight);
             }
             let mass_inv = mass.try_inverse()?;
             let p_coef = mass_inv * theta_moment * mat.kappa_kpa;
@@ -207,34 +259,34 @@ pub fn evaluate(
             for (pt, h) in points.iter().zip(&grads) {
                 let np = SVector::<f64, 3>::from(pt.np);
                 let p = np.dot(&p_coef);
-                let r = respond(mat, h, p);
+                let r = respond_with(mat, h, p, with_tangent);
                 min_jacobian = min_jacobian.min(r.jacobian);
-                let s = SVector::<f64, 5>::from(r.stress);
-                let gt = pt.g.transpose();
-                residual += gt * s * pt.weight;
-                add_gt_a_g(&mut tangent, pt, &r.tangent);
-                let dth = SVector::<f64, 5>::from(r.dtheta);
-                k_up += (gt * dth) * np.transpose() * pt.weight;
+                residual += pt.transpose_times(&r.stress) * pt.weight;
+                if with_tangent {
+                    add_gt_a_g(&mut tangent, pt, &r.tangent);
+                    k_up += pt.transpose_times(&r.dtheta) * np.transpose() * pt.weight;
+                }
                 volume += pt.weight;
                 pressure_integral += p * pt.weight;
             }
-            tangent += k_up * mass_inv * k_up.transpose() * mat.kappa_kpa;
+            if with_tangent {
+                tangent += k_up * mass_inv * k_up.transpose() * mat.kappa_kpa;
+            }
         }
         Formulation::Displacement => {
             for (pt, h) in points.iter().zip(&grads) {
-                let r0 = respond(mat, h, 0.0);
-                let p = mat.kappa_kpa * r0.theta;
-                let r = respond(mat, h, p);
+                let p = mat.kappa_kpa * theta(mat, h);
+                let r = respond_with(mat, h, p, with_tangent);
                 min_jacobian = min_jacobian.min(r.jacobian);
-                let s = SVector::<f64, 5>::from(r.stress);
-                let dth = SVector::<f64, 5>::from(r.dtheta);
-                let a = SMatrix::<f64, 5, 5>::from_fn(|i, j| r.tangent[i][j])
-                    + dth * dth.transpose() * mat.kappa_kpa;
-                let gt = pt.g.transpose();
-                residual += gt * s * pt.weight;
-                let a_rows: [[f64; 5]; 5] =
-                    std::array::from_fn(|i| std::array::from_fn(|j| a[(i, j)]));
-                add_gt_a_g(&mut tangent, pt, &a_rows);
+                residual += pt.transpose_times(&r.stress) * pt.weight;
+                if with_tangent {
+                    let dth = SVector::<f64, 5>::from(r.dtheta);
+                    let a = SMatrix::<f64, 5, 5>::from_fn(|i, j| r.tangent[i][j])
+                        + dth * dth.transpose() * mat.kappa_kpa;
+                    let a_rows: [[f64; 5]; 5] =
+                        std::array::from_fn(|i| std::array::from_fn(|j| a[(i, j)]));
+                    add_gt_a_g(&mut tangent, pt, &a_rows);
+                }
                 volume += pt.weight;
                 pressure_integral += p * pt.weight;
             }
@@ -315,6 +367,24 @@ mod tests {
     #[test]
     fn displacement_neo_hookean_tangent_is_consistent() {
         tangent_fd_check(MaterialLaw::NeoHookean, Formulation::Displacement);
+    }
+
+    #[test]
+    fn residual_without_tangent_is_the_same_numbers() {
+        let x = sample_element();
+        let u = displacement();
+        for law in [MaterialLaw::NeoHookean, MaterialLaw::Linear] {
+            let mat = Material::from_young_poisson(2300.0, 0.499, law).with_stiffening(0.5);
+            for formulation in [Formulation::Mixed, Formulation::Displacement] {
+                let full = evaluate(&x, &u, &mat, formulation).unwrap();
+                let lean = evaluate_with(&x, &u, &mat, formulation, false).unwrap();
+                // bit for bit: the residual-only path skips work, not arithmetic
+                assert_eq!(full.residual, lean.residual, "{law:?} {formulation:?}");
+                assert_eq!(full.min_jacobian, lean.min_jacobian);
+                assert_eq!(full.mean_pressure_kpa, lean.mean_pressure_kpa);
+                assert_eq!(lean.tangent, ElementMatrix::zeros());
+            }
+        }
     }
 
     #[test]

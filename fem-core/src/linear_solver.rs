@@ -67,6 +67,21 @@ struct CachedStructure {
         Argsort<usize>,
         SymbolicLu<usize>,
     )>,
+    /// Which numeric factorisation the last successful [`SymmetricSolver::solve`] left
+    /// behind (for [`SymmetricSolver::resolve`]).
+    last: Option<NumericFactor>,
+    /// Triplet slots of the last scatter into `symbolic`.
+    slots: SlotMap,
+}
+
+/// The numeric factorisation kept from the last solve.
+enum NumericFactor {
+    /// LL^T in `CachedStructure::factor`.
+    Llt,
+    /// LDL^T in `CachedStructure::factor`.
+    Ldlt,
+    /// Pivoting LU of the full matrix.
+    Lu(Box<Lu<usize, f64>>),
 }
 
 /// Solver for K x = b with symbolic-factorisation reuse.
@@ -102,14 +117,53 @@ fn solver_error(what: &str, e: impl std::fmt::Debug) -> FemError {
 /// Scatter the triplets into the values of `symbolic` (upper CSC); `None` if an entry is
 /// not in the pattern.
 fn fill_values(symbolic: &SymbolicSparseColMat<usize>, t: &UpperTriplets) -> Option<Vec<f64>> {
+    fill_values_cached(symbolic, t, &mut SlotMap::default())
+}
+
+/// Position in the CSC values of each triplet of the last scatter, with the triplets'
+/// indices: assembly emits the same element and pressure triplets in the same order every
+/// time (only the contact part at the end varies), so the common prefix of the index
+/// sequence keeps its slots and only the rest is searched in the pattern.
+#[derive(Default)]
+struct SlotMap {
+    rows: Vec<u32>,
+    cols: Vec<u32>,
+    slots: Vec<usize>,
+}
+
+/// [`fill_values`] reusing (and updating) the slots of the previous scatter into the same
+/// pattern. The values are summed in triplet order either way (the same numbers).
+fn fill_values_cached(
+    symbolic: &SymbolicSparseColMat<usize>,
+    t: &UpperTriplets,
+    map: &mut SlotMap,
+) -> Option<Vec<f64>> {
     let col_ptr = symbolic.col_ptr();
     let row_idx = symbolic.row_idx();
+    let prefix = map
+        .rows
+        .iter()
+        .zip(&map.cols)
+        .zip(t.rows.iter().zip(&t.cols))
+        .take_while(|((r0, c0), (r1, c1))| r0 == r1 && c0 == c1)
+        .count();
+    map.rows.truncate(prefix);
+    map.cols.truncate(prefix);
+    map.slots.truncate(prefix);
+    for (&r, &c) in t.rows[prefix..].iter().zip(&t.cols[prefix..]) {
+        let (ru, cu) = (r as usize, c as usize);
+        let range = col_ptr[cu]..col_ptr[cu + 1];
+        let Ok(k) = row_idx[range.clone()].binary_search(&ru) else {
+            *map = SlotMap::default();
+            return None;
+        };
+        map.rows.push(r);
+        map.cols.push(c);
+        map.slots.push(range.start + k);
+    }
     let mut values = vec![0.0; row_idx.len()];
-    for ((&r, &c), &v) in t.rows.iter().zip(&t.cols).zip(&t.values) {
-        let (r, c) = (r as usize, c as usize);
-        let range = col_ptr[c]..col_ptr[c + 1];
-        let k = row_idx[range.clone()].binary_search(&r).ok()?;
-        values[range.start + k] += v;
+    for (&slot, &v) in map.slots.iter().zip(&t.values) {
+        values[slot] += v;
     }
     Some(values)
 }
@@ -142,9 +196,9 @@ impl SymmetricSolver {
     ) -> Result<Vec<f64>, FemError> {
         let mut values = self
             .cache
-            .as_ref()
+            .as_mut()
             .filter(|c| c.symbolic.nrows() == n)
-            .and_then(|c| fill_values(&c.symbolic, t));
+            .and_then(|c| fill_values_cached(&c.symbolic, t, &mut c.slots));
         if values.is_none() {
             let mut pairs: Vec<Pair<usize, usize>> = t
                 .rows
@@ -192,6 +246,8 @@ impl SymmetricSolver {
                 factor,
                 work,
                 full: None,
+                last: None,
+                slots: SlotMap::default(),
             });
         }
         let cache = self
@@ -199,6 +255,7 @@ impl SymmetricSolver {
             .as_mut()
             .ok_or_else(|| FemError::LinearSolver("no cached structure".into()))?;
         let values = values.ok_or_else(|| FemError::LinearSolver("pattern mismatch".into()))?;
+        cache.last = None;
         let matrix = SparseColMat::new(cache.symbolic.clone(), values);
         let mut x = Mat::<f64>::from_fn(n, 1, |i, _| rhs[i]);
         let stack = MemStack::new(&mut cache.work);
@@ -221,6 +278,7 @@ impl SymmetricSolver {
                 stack,
             );
             solved = true;
+            cache.last = Some(NumericFactor::Llt);
         } else if !self.indefinite_with_lu {
             // not positive definite (far from equilibrium, or past a limit point): LDL^T
             // without pivoting on the same structure; it fails only on a zero pivot
@@ -244,7 +302,9 @@ impl SymmetricSolver {
                     stack,
                 );
                 solved = (0..n).all(|i| x[(i, 0)].is_finite());
-                if !solved {
+                if solved {
+                    cache.last = Some(NumericFactor::Ldlt);
+                } else {
                     x = Mat::<f64>::from_fn(n, 1, |i, _| rhs[i]);
                 }
             }
@@ -290,14 +350,60 @@ impl SymmetricSolver {
             let lu = Lu::try_new_with_symbolic(lu.clone(), m.as_ref())
                 .map_err(|e| solver_error("sparse LU", e))?;
             lu.solve_in_place(x.as_mut());
+            cache.last = Some(NumericFactor::Lu(Box::new(lu)));
         }
         let out: Vec<f64> = (0..n).map(|i| x[(i, 0)]).collect();
         if out.iter().any(|v| !v.is_finite()) {
+            cache.last = None;
             return Err(FemError::LinearSolver(
                 "non-finite solution (singular tangent)".into(),
             ));
         }
         Ok(out)
+    }
+
+    /// True when a numeric factorisation of dimension `n` from an earlier
+    /// [`Self::solve`] is available to [`Self::resolve`].
+    pub fn has_factor(&self, n: usize) -> bool {
+        self.cache
+            .as_ref()
+            .is_some_and(|c| c.last.is_some() && c.symbolic.nrows() == n)
+    }
+
+    /// Solve `K_old x = rhs` with the factorisation of the matrix of the last successful
+    /// [`Self::solve`] (only the triangular solves: no assembly of K, no factorisation).
+    /// Newton uses it for chord (modified Newton) iterations while the tangent changes
+    /// little. `None` if there is no such factorisation (or `rhs` has another dimension).
+    pub fn resolve(&mut self, rhs: &[f64]) -> Option<Vec<f64>> {
+        let cache = self.cache.as_mut()?;
+        let n = cache.symbolic.nrows();
+        if rhs.len() != n {
+            return None;
+        }
+        let mut x = Mat::<f64>::from_fn(n, 1, |i, _| rhs[i]);
+        match cache.last.as_ref()? {
+            NumericFactor::Llt => {
+                let stack = MemStack::new(&mut cache.work);
+                LltRef::new(&cache.llt, &cache.factor).solve_in_place_with_conj(
+                    Conj::No,
+                    x.as_mut(),
+                    Par::Seq,
+                    stack,
+                );
+            }
+            NumericFactor::Ldlt => {
+                let stack = MemStack::new(&mut cache.work);
+                LdltRef::new(&cache.llt, &cache.factor).solve_in_place_with_conj(
+                    Conj::No,
+                    x.as_mut(),
+                    Par::Seq,
+                    stack,
+                );
+            }
+            NumericFactor::Lu(lu) => lu.solve_in_place(x.as_mut()),
+        }
+        let out: Vec<f64> = (0..n).map(|i| x[(i, 0)]).collect();
+        out.iter().all(|v| v.is_finite()).then_some(out)
     }
 }
 
@@ -322,6 +428,10 @@ mod tests {
         let x2 = solver.solve(n, &t, &rhs).unwrap();
         assert_eq!(solver.symbolic_analyses, 1);
         assert_eq!(x, x2);
+        // the kept factorisation solves the same system again, bit for bit
+        assert!(solver.has_factor(n));
+        assert_eq!(solver.resolve(&rhs).unwrap(), x);
+        assert!(solver.resolve(&rhs[..n - 1]).is_none());
         // residual of the assembled symmetric system
         let mut kx = vec![0.0; n];
         for ((&r, &c), &v) in t.rows.iter().zip(&t.cols).zip(&t.values) {

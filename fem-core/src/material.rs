@@ -80,8 +80,26 @@ pub struct PointResponse {
 
 /// Evaluate the constitutive response for the gradient `h` and the pressure `p`.
 pub fn respond(mat: &Material, h: &[f64; 5], p: f64) -> PointResponse {
+    respond_with(mat, h, p, true)
+}
+
+/// The volumetric constraint `theta` of [`respond`] alone (`J - 1`, or `tr eps` for the
+/// linear law): the same number, without the stress work.
+pub fn theta(mat: &Material, h: &[f64; 5]) -> f64 {
     match mat.law {
-        MaterialLaw::NeoHookean => neo_hookean(mat.mu_kpa, mat.stiffening, h, p),
+        MaterialLaw::NeoHookean => {
+            let det2 = (1.0 + h[0]) * (1.0 + h[3]) - h[1] * h[2];
+            det2 * (1.0 + h[4]) - 1.0
+        }
+        MaterialLaw::Linear => h[0] + h[3] + h[4],
+    }
+}
+
+/// [`respond`], computing the tangent only if `with_tangent` (otherwise it is left zero):
+/// stress, theta and its gradient are the same numbers either way.
+pub fn respond_with(mat: &Material, h: &[f64; 5], p: f64, with_tangent: bool) -> PointResponse {
+    match mat.law {
+        MaterialLaw::NeoHookean => neo_hookean(mat.mu_kpa, mat.stiffening, h, p, with_tangent),
         MaterialLaw::Linear => linear(mat.mu_kpa, h, p),
     }
 }
@@ -128,7 +146,7 @@ fn linear(mu: f64, h: &[f64; 5], p: f64) -> PointResponse {
 /// `dP/dF = 2 psi1 dG/dF + 4 mu beta G (x) G + p d2J/dF2`.
 /// For `beta = 0`, `2 psi1 = mu * 1.0 = mu` exactly and the extra term is skipped, so the
 /// result is bit for bit the neo-Hookean one.
-fn neo_hookean(mu: f64, beta: f64, h: &[f64; 5], p: f64) -> PointResponse {
+fn neo_hookean(mu: f64, beta: f64, h: &[f64; 5], p: f64, with_tangent: bool) -> PointResponse {
     // full 3x3 F and its inverse (block diagonal: 2x2 in (r, z) plus the hoop stretch)
     let mut f = [[0.0; 3]; 3];
     f[0][0] = 1.0 + h[0];
@@ -161,6 +179,9 @@ fn neo_hookean(mu: f64, beta: f64, h: &[f64; 5], p: f64) -> PointResponse {
         // P_iso = mu J^{-2/3} (F - I1/3 F^{-T});  dJ/dF = J F^{-T}
         stress[a] = c * (f[i][jj] - i1 / 3.0 * finv[jj][i]) + p * j * finv[jj][i];
         dtheta[a] = j * finv[jj][i];
+        if !with_tangent {
+            continue;
+        }
         for (b, &(k, l)) in COMPONENTS.iter().enumerate() {
             let delta = if i == k && jj == l { 1.0 } else { 0.0 };
             let iso = c
@@ -172,7 +193,7 @@ fn neo_hookean(mu: f64, beta: f64, h: &[f64; 5], p: f64) -> PointResponse {
             tangent[a][b] = iso + vol;
         }
     }
-    if beta != 0.0 {
+    if beta != 0.0 && with_tangent {
         // 4 mu beta G (x) G, G = J^{-2/3} (F - I1/3 F^{-T})
         let g: [f64; 5] = std::array::from_fn(|a| {
             let (i, jj) = COMPONENTS[a];
@@ -233,6 +254,15 @@ mod tests {
         let i1: f64 = f.iter().map(|x| x * x).sum();
         let d = j.powf(-2.0 / 3.0) * i1 - 3.0;
         mat.mu_kpa / 2.0 * (d + mat.stiffening * d * d) + p * (j - 1.0)
+    }
+
+    #[test]
+    fn theta_alone_is_the_same_number() {
+        let h = [0.11, -0.07, 0.05, -0.13, 0.08];
+        for law in [MaterialLaw::NeoHookean, MaterialLaw::Linear] {
+            let mat = Material::from_young_poisson(2300.0, 0.49, law);
+            assert_eq!(theta(&mat, &h), respond(&mat, &h, 5.0).theta, "{law:?}");
+        }
     }
 
     #[test]

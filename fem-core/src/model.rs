@@ -11,7 +11,7 @@
 
 use crate::FemError;
 use crate::contact::ContactPair;
-use crate::element::{self, ElementVector, Formulation};
+use crate::element::{self, ElementGeometry, ElementVector, Formulation};
 use crate::linear_solver::{SymmetricSolver, UpperTriplets};
 use crate::material::{Material, MaterialLaw};
 use crate::mesh::Mesh;
@@ -31,6 +31,17 @@ pub struct NewtonSettings {
     /// (contact-set changes, a too-long step), and a halved step is cheaper than waiting
     /// for `max_iterations`.
     pub stall_iterations: usize,
+    /// Chord (modified Newton) iterations allowed per solve. Once Newton is in its
+    /// quadratic phase (the last factorised tangent was taken at a relative residual below
+    /// `chord_below`), or at the start of [`Model::solve_equilibrium_continuing`], the
+    /// factorised tangent is reused with a residual-only assembly as long as each such step
+    /// reduces the residual by at least `chord_contraction`; otherwise the tangent is
+    /// assembled and factored again (a chord step that increased the residual is taken
+    /// back first). The converged state satisfies the same tolerance either way; the
+    /// iteration limits count full Newton iterations only. 0 disables it.
+    pub max_chord_iterations: usize,
+    pub chord_contraction: f64,
+    pub chord_below: f64,
 }
 
 impl Default for NewtonSettings {
@@ -41,6 +52,9 @@ impl Default for NewtonSettings {
             absolute_tolerance: 1e-10,
             max_correction_mm: f64::INFINITY,
             stall_iterations: usize::MAX,
+            max_chord_iterations: 8,
+            chord_contraction: 0.1,
+            chord_below: 1e-2,
         }
     }
 }
@@ -97,17 +111,44 @@ pub struct Model {
     pub contact: Option<ContactPair>,
     pub newton: NewtonSettings,
     solver: SymmetricSolver,
+    /// Reference geometry of each element at its Gauss points (`None`: degenerate).
+    geometry: Vec<Option<ElementGeometry>>,
     /// Total Newton iterations performed (diagnostic).
     pub newton_iterations: usize,
     /// CPU time spent in assembly and in the linear solver (diagnostic).
     pub assembly_seconds: f64,
     pub solve_seconds: f64,
+    /// Diagnostic counters of the Newton solves (see [`SolverStats`]).
+    pub stats: SolverStats,
+}
+
+/// Diagnostic counters of the Newton solves of one model.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct SolverStats {
+    /// Calls of [`Model::solve_equilibrium`] and how many of them failed.
+    pub newton_solves: usize,
+    pub failed_solves: usize,
+    /// Assemblies with a tangent, and numeric factorisations (with solve).
+    pub assemblies: usize,
+    pub factorizations: usize,
+    /// Residual-only assemblies and solves with a kept factorisation (chord iterations).
+    pub residual_assemblies: usize,
+    pub resolves: usize,
+    /// Relative residual norms (norm / reference force) of the last Newton solve, one per
+    /// assembly.
+    pub last_history: Vec<f64>,
 }
 
 impl Model {
     pub fn new(mesh: Mesh, materials: Vec<Material>, formulation: Formulation) -> Self {
         let n_dofs = 2 * mesh.nodes.len();
+        let geometry = mesh
+            .elements
+            .iter()
+            .map(|el| ElementGeometry::new(&mesh.element_coordinates(el)))
+            .collect();
         let mut model = Self {
+            geometry,
             mesh,
             materials,
             formulation,
@@ -121,6 +162,7 @@ impl Model {
             newton_iterations: 0,
             assembly_seconds: 0.0,
             solve_seconds: 0.0,
+            stats: SolverStats::default(),
         };
         model.renumber();
         model
@@ -242,11 +284,16 @@ impl Model {
             asm.tangent.values.reserve(cap);
         }
         let mut internal = vec![0.0; n_dofs];
-        for el in &self.mesh.elements {
-            let x = self.mesh.element_coordinates(el);
+        for (el, geometry) in self.mesh.elements.iter().zip(&self.geometry) {
             let dofs: [usize; 18] = std::array::from_fn(|k| 2 * el.nodes[k / 2] + k % 2);
             let ue = ElementVector::from_fn(|k, _| u[dofs[k]]);
-            let res = element::evaluate(&x, &ue, &self.materials[el.body], self.formulation)?;
+            let res = element::evaluate_geometry(
+                geometry.as_ref()?,
+                &ue,
+                &self.materials[el.body],
+                self.formulation,
+                with_tangent,
+            )?;
             asm.min_jacobian = asm.min_jacobian.min(res.min_jacobian);
             for a in 0..18 {
                 internal[dofs[a]] += res.residual[a];
@@ -299,7 +346,7 @@ impl Model {
         }
         if let Some(contact) = &self.contact {
             let pos = |n: usize| self.position(u, n);
-            for term in contact.active_terms(&pos) {
+            for term in contact.active_terms(&pos, with_tangent) {
                 let n = 2 * term.nodes.len();
                 let dofs: Vec<usize> = (0..n).map(|k| 2 * term.nodes[k / 2] + k % 2).collect();
                 for a in 0..n {
@@ -361,20 +408,72 @@ impl Model {
     /// Newton–Raphson for the equilibrium at pressure `p_kpa`, starting from `u` (whose
     /// Dirichlet dofs are set from `prescribed` first). Returns the iterations used.
     pub fn solve_equilibrium(&mut self, u: &mut [f64], p_kpa: f64) -> Result<usize, NewtonFailure> {
+        self.solve_logged(u, p_kpa, false)
+    }
+
+    /// [`Self::solve_equilibrium`] for a small change of the problem just solved (e.g. an
+    /// update of the contact multipliers at the same load): the first iterations reuse the
+    /// factorised tangent of the previous solve (see [`NewtonSettings::max_chord_iterations`]).
+    pub fn solve_equilibrium_continuing(
+        &mut self,
+        u: &mut [f64],
+        p_kpa: f64,
+    ) -> Result<usize, NewtonFailure> {
+        self.solve_logged(u, p_kpa, true)
+    }
+
+    fn solve_logged(
+        &mut self,
+        u: &mut [f64],
+        p_kpa: f64,
+        continuing: bool,
+    ) -> Result<usize, NewtonFailure> {
+        self.stats.newton_solves += 1;
+        self.stats.last_history.clear();
+        let result = self.newton(u, p_kpa, continuing);
+        if result.is_err() {
+            self.stats.failed_solves += 1;
+        }
+        result
+    }
+
+    fn newton(
+        &mut self,
+        u: &mut [f64],
+        p_kpa: f64,
+        continuing: bool,
+    ) -> Result<usize, NewtonFailure> {
         self.apply_prescribed(u);
         let mut last = (f64::NAN, f64::NAN);
-        let mut last_step: Option<(f64, Vec<f64>)> = None;
+        // (residual norm before the step, the step, whether it was a chord step)
+        let mut last_step: Option<(f64, Vec<f64>, bool)> = None;
         let mut backtracks = 0;
-        for it in 0..self.newton.max_iterations {
+        // Newton iterations proper (tangent assembled and factored, or a backtrack); the
+        // chord iterations in between are counted separately
+        let mut it = 0;
+        let mut chords = 0;
+        let chord_limit = self.newton.max_chord_iterations;
+        let mut try_chord = chord_limit > 0 && continuing;
+        while it < self.newton.max_iterations {
+            let chord =
+                try_chord && chords < chord_limit && self.solver.has_factor(self.n_equations);
             let t0 = std::time::Instant::now();
-            let assembled = self.assemble(u, p_kpa, true);
+            let assembled = self.assemble(u, p_kpa, !chord);
             self.assembly_seconds += t0.elapsed().as_secs_f64();
+            if chord {
+                self.stats.residual_assemblies += 1;
+                chords += 1;
+            } else {
+                self.stats.assemblies += 1;
+                it += 1;
+            }
             let asm = match assembled {
                 Some(a) if a.min_jacobian > 0.0 && a.min_jacobian.is_finite() => a,
                 _ => {
+                    try_chord = false;
                     // an element inverted: halve the last correction (up to 6 times)
                     match &mut last_step {
-                        Some((_, du)) if backtracks < 6 => {
+                        Some((_, du, _)) if backtracks < 6 => {
                             backtracks += 1;
                             for (d, e) in self.equation.iter().enumerate() {
                                 if let Some(e) = e {
@@ -392,10 +491,11 @@ impl Model {
             let norm = r.iter().map(|x| x * x).sum::<f64>().sqrt();
             let reference = asm.force_scale;
             last = (norm, reference);
+            self.stats.last_history.push(norm / reference);
             if !norm.is_finite() {
                 break;
             }
-            let last_du = last_step.as_ref().map_or(f64::INFINITY, |(_, du)| {
+            let last_du = last_step.as_ref().map_or(f64::INFINITY, |(_, du, _)| {
                 du.iter().fold(0.0, |m: f64, x| m.max(x.abs()))
             });
             // converged: small residual, or a round-off-level correction with a residual
@@ -403,23 +503,41 @@ impl Model {
             if norm <= self.newton.relative_tolerance * reference + self.newton.absolute_tolerance
                 || (last_du <= 1e-11 && norm <= 1e-6 * reference)
             {
-                self.newton_iterations += it;
-                return Ok(it);
+                let done = it.saturating_sub(1);
+                self.newton_iterations += done;
+                return Ok(done);
             }
-            if it >= self.newton.stall_iterations && norm > 1e-4 * reference {
+            if it > self.newton.stall_iterations && norm > 1e-4 * reference {
                 self.newton_iterations += it;
                 return Err(NewtonFailure::NotConverged {
                     residual: norm,
                     reference,
                 });
             }
+            // a chord step that did not reduce the residual enough is taken back, and the
+            // tangent is refactored at the state before it
+            if let Some((prev_norm, du, true)) = &last_step
+                && norm > self.newton.chord_contraction * *prev_norm
+            {
+                try_chord = false;
+                if norm >= *prev_norm {
+                    for (d, e) in self.equation.iter().enumerate() {
+                        if let Some(e) = e {
+                            u[d] -= du[*e];
+                        }
+                    }
+                    last_step = None;
+                    continue;
+                }
+            }
             // backtracking: if the last full step increased the residual, halve it
-            if let Some((prev_norm, du)) = &mut last_step
+            if let Some((prev_norm, du, false)) = &mut last_step
                 && norm > 2.0 * *prev_norm
                 && backtracks < 3
             {
                 {
                     backtracks += 1;
+                    try_chord = false;
                     for (d, e) in self.equation.iter().enumerate() {
                         if let Some(e) = e {
                             du[*e] *= 0.5;
@@ -432,10 +550,21 @@ impl Model {
             backtracks = 0;
             let rhs: Vec<f64> = r.iter().map(|x| -x).collect();
             let t0 = std::time::Instant::now();
-            let mut du = self
-                .solver
-                .solve(self.n_equations, &asm.tangent, &rhs)
-                .map_err(NewtonFailure::Linear)?;
+            let mut du = if chord {
+                self.stats.resolves += 1;
+                match self.solver.resolve(&rhs) {
+                    Some(du) => du,
+                    None => {
+                        try_chord = false;
+                        continue;
+                    }
+                }
+            } else {
+                self.stats.factorizations += 1;
+                self.solver
+                    .solve(self.n_equations, &asm.tangent, &rhs)
+                    .map_err(NewtonFailure::Linear)?
+            };
             self.solve_seconds += t0.elapsed().as_secs_f64();
             let longest = du.iter().fold(0.0, |m: f64, x| m.max(x.abs()));
             if longest > self.newton.max_correction_mm {
@@ -447,7 +576,12 @@ impl Model {
                     u[d] += du[*e];
                 }
             }
-            last_step = Some((norm, du));
+            last_step = Some((norm, du, chord));
+            // after a full step taken in the quadratic phase try the chord next; after a
+            // chord step keep it while it contracts well (checked at the next residual)
+            if !chord {
+                try_chord = chord_limit > 0 && norm < self.newton.chord_below * reference;
+            }
         }
         self.newton_iterations += self.newton.max_iterations;
         Err(NewtonFailure::NotConverged {

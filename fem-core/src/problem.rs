@@ -26,7 +26,7 @@ use crate::mesh::{
     Mesh, SampleGeometry, SampleGrading, SampleMesh, ShellDivisions, ShellGeometry, ShellMesh,
     add_sample, add_shell,
 };
-use crate::model::{Model, NewtonFailure};
+use crate::model::{Model, NewtonFailure, NewtonSettings};
 
 /// Shell outer radius R1 (paper).
 pub const SHELL_OUTER_RADIUS_MM: f64 = 5.0;
@@ -221,6 +221,20 @@ pub struct Indentation {
     /// Force-free gap below which a slave node does not enter the contact-edge estimate
     /// (the augmentation's penetration tolerance; see `contact_edge_mm`).
     edge_gap_floor_mm: f64,
+    /// Diagnostic log of every stage-2 step attempt (see [`StepAttempt`]).
+    pub attempts: Vec<StepAttempt>,
+    /// Newton counters of stage 1 (the inflation, solved on a separate shell-only model).
+    pub stage1_stats: crate::model::SolverStats,
+}
+
+/// Diagnostic record of one attempted stage-2 step: the target travel, whether it
+/// converged, and the relative residual history of each Newton solve (the first, then one
+/// per augmentation of the contact multipliers).
+#[derive(Debug, Clone, PartialEq)]
+pub struct StepAttempt {
+    pub h_mm: f64,
+    pub converged: bool,
+    pub solves: Vec<Vec<f64>>,
 }
 
 impl Indentation {
@@ -328,6 +342,8 @@ impl Indentation {
             clamp_z_dofs,
             previous: None,
             edge_gap_floor_mm: settings.penetration_tolerance_mm.max(1e-9),
+            attempts: Vec::new(),
+            stage1_stats: Default::default(),
         }
     }
 
@@ -341,6 +357,43 @@ impl Indentation {
     /// Solve the equilibrium at travel `h_mm` and pressure `p_kpa` from `u`, with Uzawa
     /// augmentations of the contact multipliers.
     fn solve_step(
+        &mut self,
+        u: &mut [f64],
+        h_mm: f64,
+        p_kpa: f64,
+        settings: &SolverSettings,
+    ) -> Result<(), NewtonFailure> {
+        self.attempts.push(StepAttempt {
+            h_mm,
+            converged: false,
+            solves: Vec::new(),
+        });
+        let result = self.solve_step_inner(u, h_mm, p_kpa, settings);
+        if let Some(a) = self.attempts.last_mut() {
+            a.converged = result.is_ok();
+        }
+        result
+    }
+
+    /// One Newton solve of the model, logged in the current attempt.
+    fn newton_logged(
+        &mut self,
+        u: &mut [f64],
+        p_kpa: f64,
+        continuing: bool,
+    ) -> Result<usize, NewtonFailure> {
+        let result = if continuing {
+            self.model.solve_equilibrium_continuing(u, p_kpa)
+        } else {
+            self.model.solve_equilibrium(u, p_kpa)
+        };
+        if let Some(a) = self.attempts.last_mut() {
+            a.solves.push(self.model.stats.last_history.clone());
+        }
+        result
+    }
+
+    fn solve_step_inner(
         &mut self,
         u: &mut [f64],
         h_mm: f64,
@@ -366,7 +419,7 @@ impl Indentation {
             }
         }
         self.set_tube_travel(h_mm);
-        self.model.solve_equilibrium(u, p_kpa)?;
+        self.newton_logged(u, p_kpa, false)?;
         for _ in 0..settings.augmentations {
             let model = &self.model;
             let Some(contact) = &model.contact else {
@@ -382,7 +435,8 @@ impl Indentation {
             if let Some(contact) = &mut self.model.contact {
                 contact.augment(&|n: usize| pos_nodes[n]);
             }
-            self.model.solve_equilibrium(u, p_kpa)?;
+            // same state and load, updated multipliers: the last tangent still fits
+            self.newton_logged(u, p_kpa, true)?;
         }
         Ok(())
     }
@@ -398,7 +452,7 @@ impl Indentation {
         if let Some(contact) = &model.contact {
             let pos = |n: usize| model.position(u, n);
             // the slave (sample) z residual is -f dg/dz_s = f |n_z|: the downward push
-            for term in contact.active_terms(&pos) {
+            for term in contact.active_terms(&pos, false) {
                 load_mn += term.residual[1];
             }
             let gaps = contact.slave_gaps(&pos);
@@ -638,7 +692,17 @@ pub fn solve_curve_state(
     params: &CurveParams,
     settings: &SolverSettings,
 ) -> Result<(Curve, Indentation, Vec<f64>), FemError> {
-    solve_stages(params, settings, false).map(|(curve, ind, state, _)| (curve, ind, state))
+    solve_curve_state_tuned(params, settings, &|_| {})
+}
+
+/// Like [`solve_curve_state`], with the Newton controls of both stages' models adjusted by
+/// `tune` after they are built (e.g. to compare solver strategies in diagnostics).
+pub fn solve_curve_state_tuned(
+    params: &CurveParams,
+    settings: &SolverSettings,
+    tune: &dyn Fn(&mut NewtonSettings),
+) -> Result<(Curve, Indentation, Vec<f64>), FemError> {
+    solve_stages(params, settings, false, tune).map(|(curve, ind, state, _)| (curve, ind, state))
 }
 
 /// Like [`solve_curve`], but when stage 2 stops converging after at least one load step
@@ -648,8 +712,13 @@ pub fn solve_curve_state(
 /// `h <= points.last().h_mm`. Stage-1 failures and failures before the first load step are
 /// still errors.
 pub fn solve_curve_partial(params: &CurveParams) -> Result<(Curve, Option<FemError>), FemError> {
-    solve_stages(params, &SolverSettings::for_level(params.mesh_level), true)
-        .map(|(curve, _, _, stop)| (curve, stop))
+    solve_stages(
+        params,
+        &SolverSettings::for_level(params.mesh_level),
+        true,
+        &|_| {},
+    )
+    .map(|(curve, _, _, stop)| (curve, stop))
 }
 
 type Stages = (Curve, Indentation, Vec<f64>, Option<FemError>);
@@ -658,6 +727,7 @@ fn solve_stages(
     params: &CurveParams,
     settings: &SolverSettings,
     allow_truncation: bool,
+    tune: &dyn Fn(&mut NewtonSettings),
 ) -> Result<Stages, FemError> {
     validate(params)?;
     faer::set_global_parallelism(faer::Par::Seq);
@@ -665,6 +735,7 @@ fn solve_stages(
 
     // stage 1: inflation of the shell alone
     let mut stage1 = Indentation::build(params, settings, None);
+    tune(&mut stage1.model.newton);
     let mut u = vec![0.0; stage1.model.n_dofs()];
     let rest_volume_mm3 = stage1.model.enclosed_volume(&u);
     if params.pressure_kpa > 0.0 {
@@ -691,6 +762,8 @@ fn solve_stages(
 
     // stage 2: shell + sample, tube travel h with the pressure held
     let mut ind = Indentation::build(params, settings, Some(top_z_mm));
+    ind.stage1_stats = stage1.model.stats.clone();
+    tune(&mut ind.model.newton);
     let mut state = vec![0.0; ind.model.n_dofs()];
     state[..u.len()].copy_from_slice(&u);
     let apex_z0_mm = state[2 * ind.shell.inner_apex + 1];

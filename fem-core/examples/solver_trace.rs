@@ -1,0 +1,97 @@
+//! Trace the Newton work of one curve: per stage-2 step attempt the residual histories of
+//! its Newton solves (first solve, then one per contact augmentation), and the totals.
+//! `cargo run -p fem-core --release --example solver_trace -- [modulus_kpa] [pressure_kpa]
+//! [mesh_level] [friction]`; `FEM_CHORD=0` disables the chord iterations (full Newton
+//! only), `FEM_CHORD=N,Q` allows N of them per solve with contraction Q.
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let args: Vec<f64> = std::env::args()
+        .skip(1)
+        .map(|a| a.parse::<f64>())
+        .collect::<Result<_, _>>()?;
+    let get = |i: usize, d: f64| args.get(i).copied().unwrap_or(d);
+    let params = fem_core::CurveParams {
+        sample_modulus_kpa: get(0, 200.0),
+        pressure_kpa: get(1, 6.0),
+        mesh_level: get(2, 0.0) as i32,
+        friction: get(3, 0.0),
+        ..Default::default()
+    };
+    let settings = fem_core::SolverSettings::for_level(params.mesh_level);
+    let started = std::time::Instant::now();
+    let chord = std::env::var("FEM_CHORD").ok();
+    let tune = |n: &mut fem_core::model::NewtonSettings| {
+        if let Some(c) = &chord {
+            let mut parts = c.split(',');
+            if let Some(k) = parts.next().and_then(|v| v.parse().ok()) {
+                n.max_chord_iterations = k;
+            }
+            if let Some(q) = parts.next().and_then(|v| v.parse().ok()) {
+                n.chord_contraction = q;
+            }
+        }
+    };
+    let (curve, ind, _) = fem_core::problem::solve_curve_state_tuned(&params, &settings, &tune)?;
+    let seconds = started.elapsed().as_secs_f64();
+    let verbose = std::env::var_os("FEM_TRACE_QUIET").is_none();
+    let mut per_step = std::collections::BTreeMap::<String, usize>::new();
+    for a in &ind.attempts {
+        let its: Vec<usize> = a.solves.iter().map(|h| h.len()).collect();
+        *per_step.entry(format!("{:.4}", a.h_mm)).or_default() += its.iter().sum::<usize>();
+        if verbose {
+            let hist: Vec<String> = a
+                .solves
+                .iter()
+                .map(|h| {
+                    h.iter()
+                        .map(|r| format!("{r:.0e}"))
+                        .collect::<Vec<_>>()
+                        .join(" ")
+                })
+                .collect();
+            println!(
+                "h {:.4} {} assemblies {:?}: {}",
+                a.h_mm,
+                if a.converged { "ok  " } else { "FAIL" },
+                its,
+                hist.join(" | ")
+            );
+        }
+    }
+    let s1 = &ind.stage1_stats;
+    let s2 = &ind.model.stats;
+    let failed = ind.attempts.iter().filter(|a| !a.converged).count();
+    println!(
+        "stage 1: {} solves, {} assemblies, {} factorisations, {} residual-only assemblies",
+        s1.newton_solves, s1.assemblies, s1.factorizations, s1.residual_assemblies
+    );
+    println!(
+        "stage 2: {} attempts ({} failed) for {} steps, {} Newton solves ({} failed), {} \
+         assemblies, {} factorisations, {} residual-only assemblies ({:.1} full and {:.1} \
+         residual-only assemblies per step), assembly {:.3} s, linear \
+         {:.3} s, fallbacks (LDLT, LU) {:?}",
+        ind.attempts.len(),
+        failed,
+        curve.points.len() - 1,
+        s2.newton_solves,
+        s2.failed_solves,
+        s2.assemblies,
+        s2.factorizations,
+        s2.residual_assemblies,
+        s2.assemblies as f64 / (curve.points.len() - 1) as f64,
+        s2.residual_assemblies as f64 / (curve.points.len() - 1) as f64,
+        ind.model.assembly_seconds,
+        ind.model.solve_seconds,
+        ind.model.solver_fallbacks()
+    );
+    println!("curve solve {seconds:.3} s");
+    if std::env::var_os("FEM_TRACE_POINTS").is_some() {
+        for p in &curve.points {
+            println!(
+                "point {:.4} {:.12e} {:.12e} {:.12e}",
+                p.h_mm, p.u_s_mm, p.a_mm, p.load_n
+            );
+        }
+    }
+    Ok(())
+}
