@@ -91,7 +91,9 @@ pub struct ContactDisc {
     pub passes: usize,
 }
 
-/// Result for one frame. `quality` is 0 without contact, else in (0, 1]:
+/// Result for one frame. `contact` is false when no contact disc is found or its edge
+/// cannot be measured (within a few px of the apex mirror's rim, or a measurement that
+/// disagrees with the detection); `quality` is 0 then, else in (0, 1]:
 /// `1 / (1 + (radius_sigma_px / 0.1)^2)` (0.5 when the predicted error equals the 0.1 px
 /// target) times `1 / (1 + max(0, chi - 2)^2)` where chi is the sector radii's RMS about
 /// the ellipse over their predicted noise (an irregular, non-elliptical edge lowers it),
@@ -117,6 +119,20 @@ pub enum VisionError {
 }
 
 const BLOCK: usize = 4;
+
+/// Narrowest inner level ring next to the apex mirror, px (a 3 px ring around a 50 px
+/// contact still holds ~900 pixels for the level plane).
+const MIN_LEVEL_RING_PX: f64 = 3.0;
+/// Narrowest band next to the mirror, as a fraction of the configured half width: 4 px is
+/// 1.6 blur sigmas at the default 2.5 px; the blur tails cut off inside and outside a
+/// straight edge cancel, so the area stays unbiased to first order.
+const MIN_BAND_FRACTION: f64 = 0.5;
+/// A measured disc must agree with the block-level detection (about +-2 px): its radius
+/// within this fraction of the detected radius plus `DETECTION_SLACK_PX`, its centre
+/// within the same distance. A diverged edge model (a wrong level plane feeding a wild
+/// ellipse fit) fails this and the frame reads "no measurable contact".
+const DETECTION_AGREEMENT: f64 = 0.25;
+const DETECTION_SLACK_PX: f64 = 8.0;
 
 /// Per-block sums and maxima of an image (4x4 blocks; the right/bottom remainder is left
 /// out of detection only).
@@ -284,6 +300,9 @@ fn fit_plane(samples: &[[f64; 3]]) -> Option<([f64; 3], f64)> {
 struct Coarse {
     center: [f64; 2],
     radius: f64,
+    /// The detected blocks reach the image's edge: the disc may be clipped, and then its
+    /// visible part's centre and radius are not the disc's.
+    at_image_edge: bool,
 }
 
 /// Sums from one band pass.
@@ -415,7 +434,11 @@ impl ContactRadiusEstimator {
             } else {
                 None
             };
-            let shape = fitted.unwrap_or(model);
+            // An ellipse fit that moved the centre or squashed the disc far beyond the
+            // detection is a diverging fit, not a shape: keep the current one.
+            let shape = fitted
+                .filter(|e| agrees_with_detection(e, &coarse))
+                .unwrap_or(model);
             let next = shape.scaled_to_radius(band.radius);
             let moved = max_edge_distance(&next, &model);
             model = next;
@@ -427,7 +450,10 @@ impl ContactRadiusEstimator {
         let Some((band, ellipse)) = last else {
             return Ok(none);
         };
-        if band.radius < self.config.min_radius_px || !band.radius.is_finite() {
+        if band.radius < self.config.min_radius_px
+            || !band.radius.is_finite()
+            || !agrees_with_detection(&ellipse, &coarse)
+        {
             return Ok(none);
         }
         let fit_rms = rms_about(&band.points, &ellipse);
@@ -533,7 +559,22 @@ impl ContactRadiusEstimator {
             sy / cnt * b + (b - 1.0) / 2.0,
         ];
         let radius = (cnt * area / std::f64::consts::PI).sqrt();
-        Some(Coarse { center, radius })
+        let at_image_edge = component.iter().any(|&(x, y)| {
+            x == 0 || y == 0 || usize::from(x) + 1 >= bw || usize::from(y) + 1 >= bh
+        });
+        Some(Coarse {
+            center,
+            radius,
+            at_image_edge,
+        })
+    }
+
+    /// Width of the visible annulus between the apex mirror's masked disc and the model's
+    /// edge (along the shortest ray), px; `None` without a mirror.
+    fn mirror_gap_px(&self, model: &Ellipse) -> Option<f64> {
+        let (mc, r2) = self.mirror_disc?;
+        let d = (mc[0] - model.center_px[0]).hypot(mc[1] - model.center_px[1]);
+        Some(model.semi_minor_px - d - r2.sqrt())
     }
 
     /// Step 3 and 4 for one edge model.
@@ -543,8 +584,21 @@ impl ContactRadiusEstimator {
         let r_eq = model.equivalent_radius_px();
         // Shrink band and rings for small discs so the inner ring stays inside.
         let shrink = (r_eq / (cfg.band_half_width_px + cfg.level_ring_px + 3.0)).min(1.0);
-        let w = cfg.band_half_width_px * shrink;
-        let ring = cfg.level_ring_px * shrink;
+        let mut w = cfg.band_half_width_px * shrink;
+        let mut ring = cfg.level_ring_px * shrink;
+        // A contact just outside the apex mirror: the inner ring would lie in the mirror's
+        // mask, and a level fitted to the few pixels at the mask's rim is wrong (a 49 px
+        // contact once read 820 px). Narrow the inner ring to the visible annulus, then the
+        // band; an annulus too thin for both is not measurable.
+        if let Some(gap) = self.mirror_gap_px(model)
+            && gap < w + ring
+        {
+            ring = (gap - w).max(MIN_LEVEL_RING_PX);
+            w = gap - ring;
+            if w < MIN_BAND_FRACTION * cfg.band_half_width_px {
+                return None;
+            }
+        }
         let (cx, cy) = (model.center_px[0], model.center_px[1]);
         let r_lo = (model.semi_minor_px - w - ring).max(0.0);
         let r_hi = model.semi_major_px + w + ring;
@@ -797,6 +851,17 @@ fn mirror_disc(reference: &GrayImage, level: f64) -> Option<([f64; 2], f64)> {
     // Radius of the equal-area disc: robust to a few stray bright pixels.
     let r = (n as f64 / std::f64::consts::PI).sqrt() + 4.0;
     Some((c, r * r))
+}
+
+/// Whether `e` is the disc the block-level detection found (see `DETECTION_AGREEMENT`).
+fn agrees_with_detection(e: &Ellipse, coarse: &Coarse) -> bool {
+    if coarse.at_image_edge {
+        return e.equivalent_radius_px().is_finite();
+    }
+    let tolerance = DETECTION_AGREEMENT * coarse.radius + DETECTION_SLACK_PX;
+    let moved = (e.center_px[0] - coarse.center[0]).hypot(e.center_px[1] - coarse.center[1]);
+    let r = e.equivalent_radius_px();
+    r.is_finite() && (r - coarse.radius).abs() <= tolerance && moved <= tolerance
 }
 
 /// Largest distance (px) between the boundaries of two ellipses, sampled along 32 rays
