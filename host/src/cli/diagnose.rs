@@ -64,6 +64,10 @@ pub struct DiagnoseArgs {
     /// Run the confusion-matrix study and write it (Markdown) to this file.
     #[arg(long, value_name = "FILE")]
     pub confusion: Option<PathBuf>,
+    /// With --confusion: only these effects (names as in the report; the null row is always
+    /// run).
+    #[arg(long, value_delimiter = ',', value_name = "EFFECT")]
+    pub confusion_effects: Vec<String>,
     /// Seeds per cell of the confusion matrix.
     #[arg(long, default_value_t = 3)]
     pub seeds: u64,
@@ -240,13 +244,29 @@ fn confusion(
     base: &fem_core::lut::Lut,
     effects: &[EffectTable],
 ) -> ExitCode {
+    use host::diagnosis::candidates::EffectKind;
     use host::diagnosis::confusion::{ConfusionSpec, markdown, run};
-    let spec = ConfusionSpec {
+    let mut spec = ConfusionSpec {
         seeds: args.seeds,
         bootstrap: args.bootstrap,
         modulus_kpa: args.modulus,
         ..ConfusionSpec::default()
     };
+    if !args.confusion_effects.is_empty() {
+        let mut kinds = Vec::new();
+        for name in &args.confusion_effects {
+            match EffectKind::from_name(name) {
+                Some(k) => kinds.push(k),
+                None => {
+                    return bad_input(format!(
+                        "--confusion-effects: unknown effect {name:?} (known: {})",
+                        EffectKind::ALL.map(|k| k.name()).join(", ")
+                    ));
+                }
+            }
+        }
+        spec.effects = kinds;
+    }
     let start = Instant::now();
     let rows = match run(&spec, base, effects, &|line| eprintln!("{line}")) {
         Ok(r) => r,

@@ -108,6 +108,13 @@ impl EffectKind {
         }
     }
 
+    /// Whether the effect is only identifiable from several pressures together: a manometer
+    /// offset at one pressure moves a(u_s) almost as a modulus change does, so a fit on one
+    /// pressure leaves it undetermined and the held-out check splits by depth instead.
+    pub fn needs_all_pressures(self) -> bool {
+        matches!(self, Self::PressureOffset)
+    }
+
     pub fn is_physical(self) -> bool {
         matches!(
             self,

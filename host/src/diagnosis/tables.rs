@@ -21,6 +21,12 @@ pub const EFFECT_STEPS: usize = 20;
 pub const EFFECT_MAX_DEPTH_MM: f64 = 2.0;
 /// Internal pressures of the effect tables.
 pub const EFFECT_PRESSURES_KPA: [f64; 2] = [6.0, 15.0];
+/// Internal pressures of the thickness table, whose base slice is the baseline: 1 kPa steps
+/// to +-2 kPa around the set points, so that the pressure-offset candidate reads the
+/// baseline at p_air - p0 inside the table. a(p_air) is far from linear there: continuing
+/// the 6-15 kPa chord to 4.5 kPa missed a direct solve by 0.019 mm RMS at 170 kPa, about
+/// the size of the 1.5 kPa effect itself (`tests/tests/diagnose_table_error.rs`).
+pub const BASE_PRESSURES_KPA: [f64; 10] = [4.0, 5.0, 6.0, 7.0, 8.0, 13.0, 14.0, 15.0, 16.0, 17.0];
 /// Sample thicknesses (mm) of the thickness table; the last is the paper's 7 mm baseline.
 pub const THICKNESS_AXIS_MM: [f64; 4] = [3.5, 4.5, 5.5, 7.0];
 /// Friction coefficients of the friction table (0 is the baseline). Frictional curves cost
@@ -111,13 +117,17 @@ pub fn effect_base_params() -> CurveParams {
 }
 
 /// The grid of the table that varies `axis`: E2 10–1000 kPa (13 log-spaced, as the default
-/// table; friction: 46.4–681 kPa) x p_air 6 and 15 kPa x the axis values.
+/// table; friction: 46.4–681 kPa) x p_air 6 and 15 kPa (thickness: [`BASE_PRESSURES_KPA`])
+/// x the axis values.
 pub fn effect_grid(axis: EffectAxis) -> LutGrid {
     let mut grid = LutGrid::with_axes(
         &format!("effects-{}", axis_name(axis)),
         effect_base_params(),
         log_spaced(10.0, 1000.0, 13),
-        EFFECT_PRESSURES_KPA.to_vec(),
+        match axis {
+            EffectAxis::Thickness => BASE_PRESSURES_KPA.to_vec(),
+            _ => EFFECT_PRESSURES_KPA.to_vec(),
+        },
     );
     let values = axis.axis_values();
     match axis {
@@ -280,9 +290,12 @@ mod tests {
             assert_eq!(axis.values_in(&grid).len(), axis.axis_values().len());
             assert!(axis.values_in(&grid).contains(&axis.base_value()));
             assert_eq!(grid.base.mesh_level, EFFECT_MESH_LEVEL);
+            for p in EFFECT_PRESSURES_KPA {
+                assert!(grid.pressure_kpa.contains(&p));
+            }
             assert_eq!(
                 grid.curve_count(),
-                grid.modulus_kpa.len() * 2 * axis.axis_values().len()
+                grid.modulus_kpa.len() * grid.pressure_kpa.len() * axis.axis_values().len()
             );
         }
     }
