@@ -209,6 +209,9 @@ pub struct ContactTerm {
     pub gap_mm: f64,
     pub residual: Vec<f64>,
     pub tangent: Vec<f64>,
+    /// False when `tangent` has an unsymmetric part (sliding friction with
+    /// [`ContactPair::unsymmetric_friction`]).
+    pub symmetric: bool,
 }
 
 /// The shell–sample contact pair and its augmentation state.
@@ -232,6 +235,10 @@ pub struct ContactPair {
     pub friction: f64,
     /// Slip increment (mm) over which the regularised Coulomb law reaches its full value.
     pub slip_regularisation_mm: f64,
+    /// Use the friction forces' exact (unsymmetric) Jacobian, to be solved with LU, instead
+    /// of its symmetric part (which keeps the Cholesky solver but makes Newton converge
+    /// linearly, and often not at all, while slip is active).
+    pub unsymmetric_friction: bool,
     /// Surface coordinate (segment index + parameter) of each slave's closest point at the
     /// last converged step, `None` if it was not in contact.
     previous_coordinate: Vec<Option<f64>>,
@@ -326,6 +333,7 @@ impl ContactPair {
             smoothing_gap_mm,
             friction: 0.0,
             slip_regularisation_mm: 1e-4,
+            unsymmetric_friction: true,
             previous_coordinate: vec![None; n],
         }
     }
@@ -362,9 +370,9 @@ impl ContactPair {
         Some(dir.iter().map(|d| -f_t * d).collect())
     }
 
-    /// Friction residual and its tangent by central differences, symmetrised so that the
-    /// Cholesky solver can be kept (a deliberate approximation: Newton then converges
-    /// linearly instead of quadratically while slip is active).
+    /// Friction residual and its tangent by central differences: the full (unsymmetric)
+    /// Jacobian with [`Self::unsymmetric_friction`], otherwise its symmetric part (so that
+    /// the Cholesky solver can be kept; Newton then converges linearly at best).
     fn friction_term(
         &self,
         s: usize,
@@ -374,7 +382,7 @@ impl ContactPair {
         coords: &[[f64; 2]],
     ) -> Option<(Vec<f64>, Vec<f64>)> {
         let r0 = self.friction_residual(s, e, seg, xs, coords)?;
-        let k = symmetric_central_jacobian(xs, coords, |xs2, c2| {
+        let k = central_jacobian(xs, coords, !self.unsymmetric_friction, |xs2, c2| {
             self.friction_residual(s, e, seg, xs2, c2)
         })?;
         Some((r0, k))
@@ -459,7 +467,7 @@ impl ContactPair {
 
     /// Hessian of the gap by central differences of the analytic gradient, symmetrised.
     fn gap_hessian(&self, seg: &Segment, xs: [f64; 2], coords: &[[f64; 2]]) -> Option<Vec<f64>> {
-        symmetric_central_jacobian(xs, coords, |xs2, c2| {
+        central_jacobian(xs, coords, true, |xs2, c2| {
             self.gap_and_gradient(seg, xs2, c2).map(|(_, g)| g)
         })
     }
@@ -506,9 +514,11 @@ impl ContactPair {
                 }
             }
             let mut residual = residual;
+            let mut symmetric = true;
             if self.friction > 0.0 {
                 if with_tangent {
                     if let Some((rf, kf)) = self.friction_term(s, e, seg, xs, &coords) {
+                        symmetric = !self.unsymmetric_friction;
                         for (r, v) in residual.iter_mut().zip(&rf) {
                             *r += v;
                         }
@@ -531,6 +541,7 @@ impl ContactPair {
                 gap_mm: g.gap_mm,
                 residual,
                 tangent,
+                symmetric,
             });
         }
         terms
@@ -616,11 +627,12 @@ impl ContactPair {
 
 /// Jacobian of `f` with respect to the slave position `xs` followed by the segment's nodal
 /// coordinates (in that order, x before z), by central differences with a step of 1e-7 mm,
-/// then symmetrised as (J + J^T) / 2. `f` returns a vector of the same length as the
-/// unknowns (2 + 2 * coords.len()); `None` from any evaluation propagates.
-fn symmetric_central_jacobian(
+/// then, if `symmetrise`, symmetrised as (J + J^T) / 2. `f` returns a vector of the same
+/// length as the unknowns (2 + 2 * coords.len()); `None` from any evaluation propagates.
+fn central_jacobian(
     xs: [f64; 2],
     coords: &[[f64; 2]],
+    symmetrise: bool,
     f: impl Fn([f64; 2], &[[f64; 2]]) -> Option<Vec<f64>>,
 ) -> Option<Vec<f64>> {
     let n = 2 + 2 * coords.len();
@@ -642,6 +654,9 @@ fn symmetric_central_jacobian(
         for a in 0..n {
             jac[a * n + m] = (fp[a] - fm[a]) / (2.0 * step);
         }
+    }
+    if !symmetrise {
+        return Some(jac);
     }
     for a in 0..n {
         for b in 0..a {

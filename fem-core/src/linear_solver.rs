@@ -168,6 +168,42 @@ fn fill_values_cached(
     Some(values)
 }
 
+/// The full (both triangles) pattern of the cached upper pattern and its symbolic LU,
+/// built on first use.
+#[allow(clippy::type_complexity)] // the cache's own tuple
+fn full_structure(
+    cache: &mut CachedStructure,
+) -> Result<
+    &(
+        SymbolicSparseColMat<usize>,
+        Argsort<usize>,
+        SymbolicLu<usize>,
+    ),
+    FemError,
+> {
+    if cache.full.is_none() {
+        let n = cache.symbolic.nrows();
+        let (col_ptr, row_idx) = (cache.symbolic.col_ptr(), cache.symbolic.row_idx());
+        let mut pairs = Vec::with_capacity(2 * row_idx.len());
+        for c in 0..n {
+            for &r in &row_idx[col_ptr[c]..col_ptr[c + 1]] {
+                pairs.push(Pair::new(r, c));
+                if r != c {
+                    pairs.push(Pair::new(c, r));
+                }
+            }
+        }
+        let (sym, argsort) = SymbolicSparseColMat::try_new_from_indices(n, n, &pairs)
+            .map_err(|e| solver_error("full pattern", e))?;
+        let lu = SymbolicLu::try_new(sym.as_ref()).map_err(|e| solver_error("symbolic LU", e))?;
+        cache.full = Some((sym, argsort, lu));
+    }
+    cache
+        .full
+        .as_ref()
+        .ok_or_else(|| FemError::LinearSolver("no LU structure".into()))
+}
+
 impl SymmetricSolver {
     /// Include the (i, j) entries in every sparsity pattern analysed from now on, e.g. the
     /// couplings contact may create later: the symbolic factorisation is then not repeated
@@ -194,6 +230,13 @@ impl SymmetricSolver {
         t: &UpperTriplets,
         rhs: &[f64],
     ) -> Result<Vec<f64>, FemError> {
+        let values = self.upper_values(n, t)?;
+        self.factor_and_solve(n, values, rhs)
+    }
+
+    /// Values of the symmetric matrix `t` in the cached upper pattern, extending the pattern
+    /// (and repeating the symbolic analysis) if an entry does not fit.
+    fn upper_values(&mut self, n: usize, t: &UpperTriplets) -> Result<Vec<f64>, FemError> {
         let mut values = self
             .cache
             .as_mut()
@@ -250,11 +293,84 @@ impl SymmetricSolver {
                 slots: SlotMap::default(),
             });
         }
+        values.ok_or_else(|| FemError::LinearSolver("pattern mismatch".into()))
+    }
+
+    /// Solve `(K + N) x = rhs` for the symmetric `K` given by `t` plus the unsymmetric
+    /// part `N` given by full-matrix triplets `skew` (whose entries must lie in the pattern
+    /// of `K`, e.g. contact couplings reserved with [`Self::reserve`]), with the pivoting
+    /// sparse LU of the full matrix (its symbolic structure cached). The factorisation is
+    /// kept for [`Self::resolve`].
+    pub fn solve_unsymmetric(
+        &mut self,
+        n: usize,
+        t: &UpperTriplets,
+        skew: &[(u32, u32, f64)],
+        rhs: &[f64],
+    ) -> Result<Vec<f64>, FemError> {
+        let values = self.upper_values(n, t)?;
         let cache = self
             .cache
             .as_mut()
             .ok_or_else(|| FemError::LinearSolver("no cached structure".into()))?;
-        let values = values.ok_or_else(|| FemError::LinearSolver("pattern mismatch".into()))?;
+        cache.last = None;
+        full_structure(cache)?;
+        let (sym, _, symbolic_lu) = cache
+            .full
+            .as_ref()
+            .ok_or_else(|| FemError::LinearSolver("no LU structure".into()))?;
+        let (col_ptr, row_idx) = (sym.col_ptr(), sym.row_idx());
+        let slot = |r: usize, c: usize| {
+            row_idx[col_ptr[c]..col_ptr[c + 1]]
+                .binary_search(&r)
+                .ok()
+                .map(|k| col_ptr[c] + k)
+        };
+        let mut full_values = vec![0.0; row_idx.len()];
+        let (up_ptr, up_idx) = (cache.symbolic.col_ptr(), cache.symbolic.row_idx());
+        for c in 0..n {
+            for k in up_ptr[c]..up_ptr[c + 1] {
+                let r = up_idx[k];
+                let missing = || FemError::LinearSolver("full pattern mismatch".into());
+                full_values[slot(r, c).ok_or_else(missing)?] += values[k];
+                if r != c {
+                    full_values[slot(c, r).ok_or_else(missing)?] += values[k];
+                }
+            }
+        }
+        for &(r, c, v) in skew {
+            let k = slot(r as usize, c as usize).ok_or_else(|| {
+                FemError::LinearSolver("unsymmetric entry outside the reserved pattern".into())
+            })?;
+            full_values[k] += v;
+        }
+        let m = SparseColMat::new(sym.clone(), full_values);
+        let lu = Lu::try_new_with_symbolic(symbolic_lu.clone(), m.as_ref())
+            .map_err(|e| solver_error("sparse LU", e))?;
+        let mut x = Mat::<f64>::from_fn(n, 1, |i, _| rhs[i]);
+        lu.solve_in_place(x.as_mut());
+        let out: Vec<f64> = (0..n).map(|i| x[(i, 0)]).collect();
+        if out.iter().any(|v| !v.is_finite()) {
+            return Err(FemError::LinearSolver(
+                "non-finite solution (singular tangent)".into(),
+            ));
+        }
+        cache.last = Some(NumericFactor::Lu(Box::new(lu)));
+        Ok(out)
+    }
+
+    /// Factor the symmetric matrix with the cached structure and `values` (Cholesky, then
+    /// LDL^T, then LU, see the module docs) and solve.
+    fn factor_and_solve(
+        &mut self,
+        n: usize,
+        values: Vec<f64>,
+        rhs: &[f64],
+    ) -> Result<Vec<f64>, FemError> {
+        let cache = self
+            .cache
+            .as_mut()
+            .ok_or_else(|| FemError::LinearSolver("no cached structure".into()))?;
         cache.last = None;
         let matrix = SparseColMat::new(cache.symbolic.clone(), values);
         let mut x = Mat::<f64>::from_fn(n, 1, |i, _| rhs[i]);
@@ -315,26 +431,7 @@ impl SymmetricSolver {
             self.lu_fallbacks += 1;
             let upper = matrix.symbolic();
             let (col_ptr, row_idx) = (upper.col_ptr(), upper.row_idx());
-            if cache.full.is_none() {
-                let mut pairs = Vec::with_capacity(2 * row_idx.len());
-                for c in 0..n {
-                    for &r in &row_idx[col_ptr[c]..col_ptr[c + 1]] {
-                        pairs.push(Pair::new(r, c));
-                        if r != c {
-                            pairs.push(Pair::new(c, r));
-                        }
-                    }
-                }
-                let (sym, argsort) = SymbolicSparseColMat::try_new_from_indices(n, n, &pairs)
-                    .map_err(|e| solver_error("full pattern", e))?;
-                let lu = SymbolicLu::try_new(sym.as_ref())
-                    .map_err(|e| solver_error("symbolic LU", e))?;
-                cache.full = Some((sym, argsort, lu));
-            }
-            let (sym, argsort, lu) = cache
-                .full
-                .as_ref()
-                .ok_or_else(|| FemError::LinearSolver("no LU structure".into()))?;
+            let (sym, argsort, lu) = full_structure(cache)?;
             let upper_values = matrix.val();
             let mut expanded = Vec::with_capacity(2 * upper_values.len());
             for c in 0..n {

@@ -89,6 +89,10 @@ pub struct Assembly {
     /// Full residual over all dofs (reactions at Dirichlet dofs).
     pub residual: Vec<f64>,
     pub tangent: UpperTriplets,
+    /// Unsymmetric part of the tangent (full-matrix triplets, both (i, j) and (j, i)):
+    /// the tangent is `tangent` (symmetric, upper stored) plus these; empty unless sliding
+    /// friction with its exact Jacobian is active.
+    pub skew: Vec<(u32, u32, f64)>,
     pub min_jacobian: f64,
     /// Euclidean norm of the internal forces over all dofs (convergence reference).
     pub force_scale: f64,
@@ -134,6 +138,8 @@ pub struct SolverStats {
     /// Residual-only assemblies and solves with a kept factorisation (chord iterations).
     pub residual_assemblies: usize,
     pub resolves: usize,
+    /// Factorisations of an unsymmetric tangent (sparse LU; sliding friction).
+    pub unsymmetric_factorizations: usize,
     /// Relative residual norms (norm / reference force) of the last Newton solve, one per
     /// assembly.
     pub last_history: Vec<f64>,
@@ -353,13 +359,26 @@ impl Model {
                     asm.residual[dofs[a]] += term.residual[a];
                 }
                 if with_tangent {
+                    let t = &term.tangent;
                     for a in 0..n {
                         let Some(ea) = self.equation[dofs[a]] else {
                             continue;
                         };
                         for b in a..n {
-                            if let Some(eb) = self.equation[dofs[b]] {
-                                asm.tangent.add(ea, eb, term.tangent[a * n + b]);
+                            let Some(eb) = self.equation[dofs[b]] else {
+                                continue;
+                            };
+                            if term.symmetric {
+                                asm.tangent.add(ea, eb, t[a * n + b]);
+                            } else {
+                                // symmetric part to the Cholesky-shaped storage, the rest
+                                // (T - T^T) / 2 as full entries
+                                asm.tangent.add(ea, eb, 0.5 * (t[a * n + b] + t[b * n + a]));
+                                let skew = 0.5 * (t[a * n + b] - t[b * n + a]);
+                                if a != b && skew != 0.0 {
+                                    asm.skew.push((ea as u32, eb as u32, skew));
+                                    asm.skew.push((eb as u32, ea as u32, -skew));
+                                }
                             }
                         }
                     }
@@ -561,9 +580,14 @@ impl Model {
                 }
             } else {
                 self.stats.factorizations += 1;
-                self.solver
-                    .solve(self.n_equations, &asm.tangent, &rhs)
-                    .map_err(NewtonFailure::Linear)?
+                if asm.skew.is_empty() {
+                    self.solver.solve(self.n_equations, &asm.tangent, &rhs)
+                } else {
+                    self.stats.unsymmetric_factorizations += 1;
+                    self.solver
+                        .solve_unsymmetric(self.n_equations, &asm.tangent, &asm.skew, &rhs)
+                }
+                .map_err(NewtonFailure::Linear)?
             };
             self.solve_seconds += t0.elapsed().as_secs_f64();
             let longest = du.iter().fold(0.0, |m: f64, x| m.max(x.abs()));
