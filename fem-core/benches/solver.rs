@@ -1,7 +1,9 @@
 //! Criterion benchmarks of the solver's inner loop on the production mesh (mesh_level 0) in
 //! a realistic contact state (gelatin E2 = 200 kPa, p_air = 6 kPa, h = 1 mm):
-//! one assembly of residual and tangent, and one Newton iteration (assembly, sparse
-//! Cholesky factorisation with the cached symbolic analysis, solve).
+//! one assembly of residual and tangent, one Newton iteration (assembly, sparse
+//! Cholesky factorisation with the cached symbolic analysis, solve), and what a chord
+//! iteration costs instead (residual-only assembly, triangular solves with the kept
+//! factorisation).
 //! A whole curve (stage 1 + 40 steps to h = 2 mm) is timed by
 //! `cargo run -p fem-core --release --example curve`.
 
@@ -41,6 +43,21 @@ fn solver(c: &mut Criterion) {
     };
     group.bench_function("newton_iteration_assemble_factor_solve", |b| {
         b.iter(|| one_iteration(&mut linear))
+    });
+    group.bench_function("assemble_residual_only", |b| {
+        b.iter(|| ind.model.assemble(&state, p, false))
+    });
+    // a chord iteration: residual-only assembly and a solve with the factorisation kept
+    // from the last Newton iteration above
+    group.bench_function("chord_iteration_residual_and_resolve", |b| {
+        b.iter(|| {
+            let asm = ind.model.assemble(&state, p, false)?;
+            let rhs: Vec<f64> = (0..ind.model.n_dofs())
+                .filter(|&d| ind.model.is_free(d))
+                .map(|d| -asm.residual[d])
+                .collect();
+            linear.resolve(&rhs)
+        })
     });
     group.finish();
 }

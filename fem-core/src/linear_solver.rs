@@ -10,7 +10,10 @@
 //! Cholesky factorisation fails (a tangent that is not positive definite: far from
 //! equilibrium, or near a limit point), LDL^T without pivoting is tried on the same
 //! structure, and only if that meets a zero pivot the full matrix is factored with sparse LU
-//! (its structure cached too).
+//! (its structure cached too). Sliding friction adds an unsymmetric part (full-matrix
+//! triplets on top of the symmetric upper triplets), solved with the same cached LU
+//! structure ([`SymmetricSolver::solve_unsymmetric`]). The last numeric factorisation is
+//! kept for chord iterations ([`SymmetricSolver::resolve`]).
 
 // Index loops mirror the tensor-index equations of the numerical kernels.
 #![allow(clippy::needless_range_loop)]
