@@ -99,9 +99,14 @@ fn camera_radius_offset_is_named_and_the_gap_shrinks() {
 }
 
 #[test]
-#[ignore = "minutes in release (friction solves); FAILS today at friction and pressure_offset (never named in the confusion matrix, README Diagnosis); run with --release -- --ignored"]
+#[ignore = "minutes in release (friction solves); FAILS today at friction (named radius_scale at noise 1) and pressure_offset (below its minimum detectable size or taken for finite_thickness; README Diagnosis); run with --release -- --ignored --nocapture"]
 fn every_effect_at_a_clear_size_is_named_and_the_gap_shrinks() {
-    for (k, kind) in EffectKind::ALL.into_iter().enumerate() {
-        check(kind, 100 + k as u64);
-    }
+    // every effect is checked (a failure is reported, not the end of the run)
+    let failed: Vec<&str> = EffectKind::ALL
+        .into_iter()
+        .enumerate()
+        .filter(|&(k, kind)| std::panic::catch_unwind(|| check(kind, 100 + k as u64)).is_err())
+        .map(|(_, kind)| kind.name())
+        .collect();
+    assert!(failed.is_empty(), "not named or no gap shrink: {failed:?}");
 }
