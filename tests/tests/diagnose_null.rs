@@ -1,6 +1,7 @@
 //! False positives: clean data (no hidden effect; hil-sim truth at the off-grid 170 kPa with
 //! correlated noise) must give verdict `none` in at least 95 % of seeds. The default suite
-//! runs 4 seeds and allows 1 (if the true rate were 5 %, P(>= 2 of 4) = 1.4 %); the full
+//! runs 6 seeds and allows 1 (if the true rate were 5 %, P(>= 2 of 6) = 3.3 %; 12 seeds
+//! took 40 s in debug, too long for the default suite); the full
 //! check (>= 100 seeds, <= 5 %) is
 //! `cargo test --release -p system-tests --test diagnose_null -- --ignored --nocapture`
 //! (measured 2 of 100 once the noise model's table-error term followed the load steps; it
@@ -71,8 +72,8 @@ fn false_positives(seeds: u64) -> (usize, Vec<String>) {
 
 #[test]
 fn clean_data_rarely_names_an_effect() {
-    let (fp, labels) = false_positives(4);
-    assert!(fp <= 1, "{fp} of 4 false positives: {labels:?}");
+    let (fp, labels) = false_positives(6);
+    assert!(fp <= 1, "{fp} of 6 false positives: {labels:?}");
 }
 
 #[test]
