@@ -125,6 +125,21 @@ pub struct FrameScene {
     pub mirror: bool,
 }
 
+impl FrameScene {
+    /// A circular contact of `radius_px` (0: none) as the bench sees it: LED fully on, read
+    /// noise and the apex mirror.
+    pub fn circle(radius_px: f64) -> Self {
+        Self {
+            radius_px,
+            axis_ratio: 1.0,
+            axis_angle_rad: 0.0,
+            led: 1.0,
+            noise: true,
+            mirror: true,
+        }
+    }
+}
+
 /// erfc by Abramowitz & Stegun 7.1.26.
 pub fn erfc(x: f64) -> f64 {
     let z = x.abs();

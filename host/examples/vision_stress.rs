@@ -44,14 +44,7 @@ fn main() -> anyhow::Result<()> {
     let cfg = CameraConfig::default();
     let (w, h) = (cfg.width, cfg.height);
     let mut renderer = CameraRenderer::new(cfg);
-    let scene = |radius_px: f64| FrameScene {
-        radius_px,
-        axis_ratio: 1.0,
-        axis_angle_rad: 0.0,
-        led: 1.0,
-        noise: true,
-        mirror: true,
-    };
+    let scene = FrameScene::circle;
     const BIN_PX: f64 = 2.0;
     let mut bins = vec![Bin::default(); ((r_max_px - r_min_px) / BIN_PX) as usize + 1];
     let mut far_off = Vec::new();

@@ -14,14 +14,7 @@ use host::camera::GrayImage;
 use host::vision::{ContactRadiusConfig, ContactRadiusEstimator};
 
 fn scene(radius_px: f64) -> FrameScene {
-    FrameScene {
-        radius_px,
-        axis_ratio: 1.0,
-        axis_angle_rad: 0.0,
-        led: 1.0,
-        noise: true,
-        mirror: true,
-    }
+    FrameScene::circle(radius_px)
 }
 
 #[test]

@@ -262,18 +262,7 @@ pub fn px_per_mm_from_reference_disc(
     let mut rng = SimRng::new(scenario.seed ^ 0xD15C);
     let mut buf = Vec::new();
     let mut render = |radius_px: f64, rng: &mut SimRng| {
-        renderer.render_gray(
-            &FrameScene {
-                radius_px,
-                axis_ratio: 1.0,
-                axis_angle_rad: 0.0,
-                led: 1.0,
-                noise: true,
-                mirror: true,
-            },
-            rng,
-            &mut buf,
-        );
+        renderer.render_gray(&FrameScene::circle(radius_px), rng, &mut buf);
         GrayImage::new(cfg.width, cfg.height, buf.clone())
     };
     let reference = render(0.0, &mut rng).map_err(|e| SimRunError::Camera(e.to_string()))?;
