@@ -244,9 +244,12 @@ fn emergency_stop_during_an_experiment_vents_and_stops_within_one_control_period
     let t_arrive = (t_read / 1e-3).ceil() * 1e-3;
     let control_period_s = 1e-3; // DeviceInfo.control_period_us (firmware constant)
     let before = truth.iter().rev().find(|t| t.t_s < t_arrive).unwrap();
+    // The vent was closed before the stop (the pump may momentarily be off: mid-stroke the
+    // stage compresses the shell, the pressure rises above the set point and the PID's
+    // output can be 0 — a clean-clone CI run caught exactly that tick).
     assert!(
-        !before.outputs.vent_open && before.outputs.pump_duty_per_10k > 0,
-        "the pump was running and the vent closed before the stop: {:?}",
+        !before.outputs.vent_open,
+        "the vent was closed before the stop: {:?}",
         before.outputs
     );
     let safe = truth
