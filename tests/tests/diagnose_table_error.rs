@@ -6,7 +6,8 @@
 //! was built with the current solver).
 //!
 //! `cargo test --release -p system-tests --test diagnose_table_error -- --ignored --nocapture`
-//! (`DIAG_TABLES=DIR` reads the tables from DIR instead of the shipped ones).
+//! (`DIAG_TABLES=DIR` reads the tables from DIR instead of the shipped ones, e.g. tables
+//! rebuilt with `tactile diagnose --build-tables DIR`).
 
 use fem_core::{CurveParams, solve_curve};
 use host::diagnosis::model::Surface;
@@ -70,64 +71,28 @@ fn truth_minus_table_per_step() {
     let lut = sub_table(&t.lut, &t.axis.select(t.axis.base_value())).expect("measurement setup");
     let base =
         Surface::new(&lut, &fem_core::lut::EffectSelection::default()).expect("measurement setup");
-    // staleness: at a table node the interpolation in E2 is exact
+    // staleness: at a table node the interpolation in E2 is exact, so a direct solve must
+    // match the table to the solver's own path dependence (step cuts move curves by at most
+    // 1e-4 mm, measured over the 78 default-table curves); a stale table (a solver change
+    // since the build) moved a by up to 0.023 mm
     let nodes = lut.grid.modulus_kpa.clone();
     for &e in nodes.iter().filter(|&&e| (140.0..220.0).contains(&e)) {
         for p in [6.0, 15.0] {
-            compare(&base, e, p);
+            let worst = compare(&base, e, p);
+            assert!(
+                worst < 1e-4,
+                "E2 {e} p {p}: table node differs by {worst} mm"
+            );
         }
     }
-    // the off-grid truths of the tests
+    // the off-grid truths of the tests: interpolation across E2 (measured worst 13 um at
+    // 170 kPa, 22 um at 40 kPa); 0.03 mm bounds that, and stays below the effects the
+    // diagnosis must see (a 3 mm thinner sample moves a by ~0.05 mm)
     for e in [170.0, 40.0] {
         for p in [6.0, 15.0] {
-            compare(&base, e, p);
+            let worst = compare(&base, e, p);
+            assert!(worst < 0.03, "E2 {e} p {p}: truth - table {worst} mm");
         }
-    }
-}
-
-/// Largest differences between the tables in `DIAG_TABLES` and the shipped ones, per curve.
-#[test]
-#[ignore = "measurement: needs DIAG_TABLES=DIR with rebuilt tables; run with --release -- --ignored --nocapture"]
-fn rebuilt_tables_against_shipped() {
-    let Ok(dir) = std::env::var("DIAG_TABLES") else {
-        println!("DIAG_TABLES not set: nothing to compare");
-        return;
-    };
-    for axis in [
-        EffectAxis::Thickness,
-        EffectAxis::Stiffening,
-        EffectAxis::Friction,
-    ] {
-        let Ok(new) = read_effect_table(&std::path::Path::new(&dir).join(axis.file_name())) else {
-            continue;
-        };
-        let old = read_effect_table(&shipped_tables_dir().join(axis.file_name()))
-            .expect("measurement setup");
-        if new.lut.grid.modulus_kpa != old.lut.grid.modulus_kpa
-            || new.lut.grid.pressure_kpa != old.lut.grid.pressure_kpa
-            || axis.values_in(&new.lut.grid) != axis.values_in(&old.lut.grid)
-        {
-            println!("{}: different grids, not compared", axis.file_name());
-            continue;
-        }
-        let (mut da, mut du, mut dn) = (0.0f64, 0.0f64, 0usize);
-        for c in &new.lut.curves {
-            let Some(o) = old.lut.curve(c.index) else {
-                continue;
-            };
-            if c.a_mm.len() != o.a_mm.len() {
-                dn += 1;
-                continue;
-            }
-            for k in 0..c.a_mm.len() {
-                da = da.max((c.a_mm[k] - o.a_mm[k]).abs());
-                du = du.max((c.u_s_mm[k] - o.u_s_mm[k]).abs());
-            }
-        }
-        println!(
-            "{}: max |da| {da:.2e} mm, max |du_s| {du:.2e} mm, {dn} curves of different length",
-            axis.file_name()
-        );
     }
 }
 
@@ -205,12 +170,20 @@ fn loo_calibration() {
         z2[z2.len() / 2],
         z2.len()
     );
+    // the scale is calibrated so that the standardised table error has unit mean square
+    // (0.85 chosen from a pooled ratio of 0.82); outside 0.5..2 the noise model would
+    // under- or over-weight the table error by more than ~40 % in sigma
+    let mean_z2 = z2.iter().sum::<f64>() / z2.len() as f64;
+    assert!((0.5..2.0).contains(&mean_z2), "mean z^2 {mean_z2}");
+    // the error alternates between steps (measured lag-1 correlation -0.39): the reason it
+    // lives on independent knots, not on a smooth correlated term
+    assert!(lag / lag0 < 0.0, "lag-1 correlation {}", lag / lag0);
 }
 
-/// The pressure-offset candidate reads the baseline at p_air - p0, continued linearly from
-/// the table's pressures: this compares direct solves at 4.5 and 13.5 kPa (a 1.5 kPa offset
-/// of the 6 and 15 kPa set points) with that continuation, next to the effect itself
-/// (a at the set point).
+/// The pressure-offset candidate reads the baseline at p_air - p0 from the table (which has
+/// 1 kPa pressure steps around 6 and 15 kPa): this compares direct solves at 4.5 and 13.5 kPa
+/// (a 1.5 kPa offset of the 6 and 15 kPa set points) with that reading, next to the effect
+/// itself (a at the set point).
 #[test]
 #[ignore = "measurement (fem-core solves); run with --release -- --ignored --nocapture"]
 fn pressure_continuation_error() {
@@ -219,6 +192,7 @@ fn pressure_continuation_error() {
     let lut = sub_table(&t.lut, &t.axis.select(t.axis.base_value())).expect("measurement setup");
     let base =
         Surface::new(&lut, &fem_core::lut::EffectSelection::default()).expect("measurement setup");
+    let mut failures = Vec::new();
     for e in [146.8, 170.0] {
         for (p_set, p_true) in [(6.0, 4.5), (15.0, 13.5), (6.0, 5.5), (15.0, 14.5)] {
             let c = match solve_curve(&truth_params(e, p_true)) {
@@ -240,11 +214,23 @@ fn pressure_continuation_error() {
                     q.u_s_mm, q.a_mm, cont, at_set
                 );
             }
+            let (rms_err, rms_eff) = ((s_err / n as f64).sqrt(), (s_eff / n as f64).sqrt());
             println!(
-                "E2 {e} p_true {p_true} (set {p_set}): RMS truth - continuation {:.4} mm, RMS effect (truth - set point) {:.4} mm",
-                (s_err / n as f64).sqrt(),
-                (s_eff / n as f64).sqrt()
+                "E2 {e} p_true {p_true} (set {p_set}): RMS truth - table {rms_err:.4} mm, RMS effect (truth - set point) {rms_eff:.4} mm"
             );
+            // At a table node (146.8 kPa) the baseline read at the true pressure must be far
+            // closer to the truth than the effect is large (before the 1 kPa pressure steps the
+            // continuation missed by as much as the effect: 0.019 vs 0.020 mm); measured
+            // 0.0002 / 0.0005 mm vs 0.016 / 0.006 mm, so a tenth has margin. Off-grid (170 kPa)
+            // the E2 interpolation error dominates (4.5 kPa: 0.0147 mm, worst at the last two
+            // steps near the table's u_s end), which `truth_minus_table_per_step` bounds and
+            // the noise model carries: printed, not asserted here.
+            if e == 146.8 && rms_err >= 0.1 * rms_eff {
+                failures.push(format!(
+                    "E2 {e} p {p_true}: {rms_err:.4} vs effect {rms_eff:.4} mm"
+                ));
+            }
         }
     }
+    assert!(failures.is_empty(), "{failures:?}");
 }
