@@ -34,7 +34,7 @@ fn false_positives(seeds: u64) -> (usize, Vec<String>) {
             seed: 1000 + seed,
             ..spec0.clone()
         };
-        let points = simulate_with(&spec, &scenario, mech.as_ref());
+        let points = simulate_with(&spec, &scenario, &mech);
         let options = DiagnoseOptions {
             bootstrap: 200,
             confidence_reruns: 0,
@@ -57,9 +57,7 @@ fn false_positives(seeds: u64) -> (usize, Vec<String>) {
                         "{} d {:.1} held-out gain {:.1} margin {:.1}",
                         c.label,
                         c.delta_chi2.unwrap_or(f64::NAN),
-                        c.held_out
-                            .as_ref()
-                            .map_or(f64::NAN, |h| h.baseline_chi2 - h.candidate_chi2),
+                        c.held_out.as_ref().map_or(f64::NAN, |h| h.gain()),
                         c.held_out.as_ref().map_or(f64::NAN, |h| h.margin_chi2)
                     ))
                     .collect::<Vec<_>>()

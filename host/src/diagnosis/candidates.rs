@@ -26,7 +26,7 @@
 use serde::Serialize;
 
 use super::data::Point;
-use super::model::Model;
+use super::model::{Channel, Model};
 use super::tables::EffectAxis;
 
 /// Shell outer radius R1 (mm), as in the simulator.
@@ -199,9 +199,25 @@ pub fn predict_a(
     theta: f64,
     pt: &Point,
 ) -> f64 {
+    predict(model, cand, e, theta, pt, Channel::Radius)
+}
+
+/// Predicted value of `channel` at `pt`. The load channel follows the same effects: the
+/// table effects read their load column, the hereditary one the load at the secant modulus;
+/// the camera effects (radius offset and scale) and adhesion (JKR enlarges the contact at
+/// the load the elastic model carries, as in the simulator) leave the load as the baseline's.
+pub fn predict(
+    model: &Model<'_>,
+    cand: Option<&Candidate>,
+    e: f64,
+    theta: f64,
+    pt: &Point,
+    channel: Channel,
+) -> f64 {
     let (p, u) = (pt.p_air_kpa, pt.u_s_mm);
+    let base_at = |e: f64, p: f64, u: f64| channel.of(&model.base.sample(e, p, u));
     let Some(c) = cand else {
-        return model.base.sample(e, p, u).a_mm;
+        return base_at(e, p, u);
     };
     match c.kind {
         EffectKind::FiniteThickness | EffectKind::Friction | EffectKind::StrainStiffening => {
@@ -210,7 +226,6 @@ pub fn predict_a(
                 EffectKind::Friction => EffectAxis::Friction,
                 _ => EffectAxis::Stiffening,
             };
-            let base = model.base.sample(e, p, u).a_mm;
             match model.axis(axis) {
                 Some(ax) => {
                     let v = if axis == EffectAxis::Thickness {
@@ -218,16 +233,20 @@ pub fn predict_a(
                     } else {
                         theta
                     };
-                    base + ax.delta_a(e, p, u, v)
+                    base_at(e, p, u) + ax.delta(channel, e, p, u, v)
                 }
                 None => {
                     // Tabor-strain approximation (simulator's): fixed point on a
-                    let mut a = base;
+                    let mut a = model.base.sample(e, p, u).a_mm;
+                    let mut f = 1.0;
                     for _ in 0..4 {
-                        let f = (1.0 + theta * 0.2 * a / SHELL_OUTER_RADIUS_MM).max(0.1);
+                        f = (1.0 + theta * 0.2 * a / SHELL_OUTER_RADIUS_MM).max(0.1);
                         a = model.base.sample(e * f, p, u).a_mm;
                     }
-                    a
+                    match channel {
+                        Channel::Radius => a,
+                        Channel::Load => base_at(e * f, p, u),
+                    }
                 }
             }
         }
@@ -238,16 +257,25 @@ pub fn predict_a(
                 let h = model.base.sample(e_eff, p, u).h_mm;
                 e_eff = e * secant_factor(theta, tau, h);
             }
-            model.base.sample(e_eff, p, u).a_mm
+            base_at(e_eff, p, u)
         }
         EffectKind::Adhesion => {
             let s = model.base.sample(e, p, u);
-            s.a_mm * jkr_factor(theta, s.load_n)
+            match channel {
+                Channel::Radius => s.a_mm * jkr_factor(theta, s.load_n),
+                Channel::Load => s.load_n,
+            }
         }
-        EffectKind::RadiusOffset => model.base.sample(e, p, u).a_mm + theta,
-        EffectKind::RadiusScale => model.base.sample(e, p, u).a_mm * (1.0 + theta),
-        EffectKind::DisplacementOffset => model.base.sample(e, p, u - theta).a_mm,
-        EffectKind::PressureOffset => model.base.sample(e, p - theta, u).a_mm,
+        EffectKind::RadiusOffset => match channel {
+            Channel::Radius => base_at(e, p, u) + theta,
+            Channel::Load => base_at(e, p, u),
+        },
+        EffectKind::RadiusScale => match channel {
+            Channel::Radius => base_at(e, p, u) * (1.0 + theta),
+            Channel::Load => base_at(e, p, u),
+        },
+        EffectKind::DisplacementOffset => base_at(e, p, u - theta),
+        EffectKind::PressureOffset => base_at(e, p - theta, u),
     }
 }
 

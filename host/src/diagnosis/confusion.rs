@@ -101,7 +101,7 @@ pub fn run(
                     seed: seed * 7919 + (noise * 100.0) as u64,
                     ..sim0.clone()
                 };
-                let points = simulate_with(&sim, &scenario, mech.as_ref());
+                let points = simulate_with(&sim, &scenario, &mech);
                 let options = DiagnoseOptions {
                     bootstrap: spec.bootstrap,
                     confidence_reruns: 0,

@@ -19,6 +19,7 @@ pub mod confusion;
 pub mod data;
 pub mod fitting;
 pub mod linalg;
+pub mod load_channel;
 pub mod localisation;
 pub mod model;
 pub mod noise_model;
@@ -39,6 +40,7 @@ use serde::Serialize;
 use candidates::{Candidate, predict_a};
 use data::Point;
 use fitting::{GlsFit, fit};
+use load_channel::LoadChannel;
 use localisation::{ApparentModulus, Cell, Localisation};
 use model::Model;
 use noise_model::{NoiseModel, PressureNoise};
@@ -94,7 +96,8 @@ pub struct GapSummary {
     pub chi2_per_dof: f64,
     pub rms_residual_mm: f64,
     pub worst_whitened: f64,
-    /// Held-out whitened chi^2 per predicted point (of the winning candidate's check).
+    /// Held-out whitened chi^2 per predicted value (of the winning candidate's check: both
+    /// channels when loads are present).
     pub held_out_chi2_per_point: Option<f64>,
 }
 
@@ -139,6 +142,8 @@ pub struct Diagnosis {
     pub disagreement: Vec<Cell>,
     pub noise_model: Vec<PressureNoise>,
     pub noise_model_assumed: bool,
+    /// The load channel's noise model and baseline score (None without loads).
+    pub load_channel: Option<load_channel::LoadSummary>,
     pub host_fit: crate::fit::ModulusFit,
     pub localisation: Localisation,
     pub candidates: Vec<Screened>,
@@ -213,13 +218,15 @@ fn run_selection(
     e0: f64,
     threshold: Option<f64>,
     refit: usize,
+    load: Option<&LoadChannel>,
 ) -> Option<SelectionRun> {
     let base = fit(model, None, points, subset, whitener, e0, 0.0, 40)?;
     let (_, sigs) =
         signatures::signatures(model, cands, points, subset, whitener, base.modulus_kpa);
     let t = threshold.unwrap_or(f64::INFINITY);
-    let screened =
-        selection::screen_and_refit(model, &sigs, points, subset, whitener, &base, t, refit);
+    let screened = selection::screen_and_refit(
+        model, &sigs, points, subset, whitener, &base, t, refit, load,
+    );
     Some(SelectionRun {
         base,
         sigs,
@@ -293,8 +300,15 @@ pub fn diagnose(
     let subset = all;
 
     // 3. baseline GLS fit, signatures, threshold, screening
-    let prelim = run_selection(&model, &cands, &points, &subset, &whitener, e_host, None, 0)
-        .ok_or_else(|| DiagnoseError::Model("the baseline GLS fit failed".into()))?;
+    let prelim = run_selection(
+        &model, &cands, &points, &subset, &whitener, e_host, None, 0, None,
+    )
+    .ok_or_else(|| DiagnoseError::Model("the baseline GLS fit failed".into()))?;
+    // the load channel, when every used point has a load (a prediction check of each refit)
+    let load = LoadChannel::new(&model, &points, &subset, prelim.base.modulus_kpa);
+    if load.is_none() {
+        notes.push("no load channel in the selection (loads missing on some points, or no replicates to estimate their noise): candidates are ranked on the contact radius alone".into());
+    }
     let threshold = selection::bootstrap_threshold(
         &prelim.sigs,
         whitener.len(),
@@ -313,6 +327,7 @@ pub fn diagnose(
         &base_fit,
         t95,
         options.refit,
+        load.as_ref(),
     );
     for s in screened.iter_mut() {
         if let Some(f) = &s.fit
@@ -326,6 +341,7 @@ pub fn diagnose(
                 &noise,
                 f.modulus_kpa,
                 f.theta,
+                load.as_ref(),
             );
             if s.passes_threshold
                 && let Some(h) = s.held_out.as_mut()
@@ -342,10 +358,11 @@ pub fn diagnose(
                     f.theta,
                     selection::HELD_OUT_DRAWS,
                     options.seed ^ 0x4e1d,
+                    load.as_ref(),
                 ) {
                     Some(m) => {
                         h.margin_chi2 = m.max(0.0);
-                        h.confirms = h.baseline_chi2 - h.candidate_chi2 > h.margin_chi2;
+                        h.confirms = h.gain() > h.margin_chi2;
                     }
                     None => h.confirms = false,
                 }
@@ -435,16 +452,34 @@ pub fn diagnose(
             .iter()
             .map(|p| predict_a(&model, Some(&w.candidate), aug.modulus_kpa, aug.theta, p))
             .collect();
+        let f_aug_load: Vec<f64> = points
+            .iter()
+            .map(|p| {
+                candidates::predict(
+                    &model,
+                    Some(&w.candidate),
+                    aug.modulus_kpa,
+                    aug.theta,
+                    p,
+                    model::Channel::Load,
+                )
+            })
+            .collect();
         let mut hits = 0usize;
         let mut done = 0usize;
         for _ in 0..options.confidence_reruns {
             let z: Vec<f64> = (0..whitener.len()).map(|_| g.normal()).collect();
             let noise_v = whitener.colour(&z, points.len());
+            let noise_l = load.as_ref().map(|lc| {
+                let z: Vec<f64> = (0..lc.whitener.len()).map(|_| g.normal()).collect();
+                lc.whitener.colour(&z, points.len())
+            });
             let sim: Vec<Point> = points
                 .iter()
                 .enumerate()
                 .map(|(i, p)| Point {
                     a_mm: f_aug[i] + noise_v[i],
+                    load_n: noise_l.as_ref().map(|v| f_aug_load[i] + v[i]).or(p.load_n),
                     ..*p
                 })
                 .collect();
@@ -457,10 +492,10 @@ pub fn diagnose(
                 aug.modulus_kpa,
                 Some(t95),
                 options.refit,
+                load.as_ref(),
             ) {
                 done += 1;
-                if let Some(best) = run.screened.first()
-                    && best.passes_threshold
+                if let Some(best) = run.screened.iter().find(|s| s.passes_threshold)
                     && (best.candidate.kind == w.candidate.kind
                         || decision.group.contains(&best.effect))
                 {
@@ -478,7 +513,7 @@ pub fn diagnose(
     let baseline = GapSummary::of(
         "baseline",
         &base_fit,
-        held.as_ref().map(|h| h.baseline_chi2 / h.points as f64),
+        held.as_ref().map(|h| h.chi2_per_point(false)),
     );
     let named = matches!(decision.verdict, Verdict::Effect | Verdict::Ambiguous);
     let augmented = if named {
@@ -487,9 +522,7 @@ pub fn diagnose(
                 GapSummary::of(
                     &w.label,
                     f,
-                    w.held_out
-                        .as_ref()
-                        .map(|h| h.candidate_chi2 / h.points as f64),
+                    w.held_out.as_ref().map(|h| h.chi2_per_point(true)),
                 )
             })
         })
@@ -588,6 +621,7 @@ pub fn diagnose(
         disagreement,
         noise_model: noise.pressures.clone(),
         noise_model_assumed: noise.any_assumed(),
+        load_channel: load.as_ref().map(LoadChannel::summary),
         host_fit,
         localisation,
         candidates: screened,

@@ -15,6 +15,39 @@ pub struct ModelSample {
     pub h_mm: f64,
 }
 
+/// A measured channel against u_s: the contact radius (a–u_s, mm) or the load (P–u_s, N).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Channel {
+    Radius,
+    Load,
+}
+
+impl Channel {
+    /// The channel's value in a model sample.
+    pub fn of(self, s: &ModelSample) -> f64 {
+        match self {
+            Self::Radius => s.a_mm,
+            Self::Load => s.load_n,
+        }
+    }
+
+    /// The channel's measured value at a point (NaN where the point has no load).
+    pub fn measured(self, p: &super::data::Point) -> f64 {
+        match self {
+            Self::Radius => p.a_mm,
+            Self::Load => p.load_n.unwrap_or(f64::NAN),
+        }
+    }
+
+    pub fn unit(self) -> &'static str {
+        match self {
+            Self::Radius => "mm",
+            Self::Load => "N",
+        }
+    }
+}
+
 /// One (E2, p_air) slice, clamped into its table.
 #[derive(Debug, Clone)]
 pub struct Surface<'a> {
@@ -98,8 +131,9 @@ pub struct AxisSurfaces<'a> {
 }
 
 impl AxisSurfaces<'_> {
-    /// a at axis value `v` minus a at the axis' base value (linear between axis nodes).
-    pub fn delta_a(&self, e: f64, p: f64, u: f64, v: f64) -> f64 {
+    /// `channel` at axis value `v` minus its value at the axis' base value (linear between
+    /// axis nodes).
+    pub fn delta(&self, channel: Channel, e: f64, p: f64, u: f64, v: f64) -> f64 {
         let at = |v: f64| -> f64 {
             let n = self.values.len();
             let k = match self.values.iter().position(|&x| x >= v) {
@@ -110,11 +144,11 @@ impl AxisSurfaces<'_> {
             .min(n - 2);
             let (v0, v1) = (self.values[k], self.values[k + 1]);
             let w = ((v - v0) / (v1 - v0)).clamp(0.0, 1.0);
-            let a0 = self.surfaces[k].sample(e, p, u).a_mm;
+            let a0 = channel.of(&self.surfaces[k].sample(e, p, u));
             if w == 0.0 {
                 return a0;
             }
-            a0 + w * (self.surfaces[k + 1].sample(e, p, u).a_mm - a0)
+            a0 + w * (channel.of(&self.surfaces[k + 1].sample(e, p, u)) - a0)
         };
         at(v) - at(self.axis.base_value())
     }
@@ -163,7 +197,7 @@ impl<'a> Model<'a> {
     /// (E2, p_air): |PCHIP - chord| through the same nodes (the error bound of the lower-order
     /// interpolant; a reader that joins the table's steps by chords, like hil-sim's plant,
     /// differs from the table's PCHIP by exactly this).
-    pub fn u_interpolation_error_mm(&self, e: f64, p: f64, u: f64) -> f64 {
+    pub fn u_interpolation_error(&self, channel: Channel, e: f64, p: f64, u: f64) -> f64 {
         let g = &self.base_lut.grid;
         let nearest = |axis: &[f64], x: f64, log: bool| {
             (0..axis.len())
@@ -200,7 +234,10 @@ impl<'a> Model<'a> {
         for k in 0..c.len() {
             if us.last().is_none_or(|&l| c.u_s_mm[k] > l) {
                 us.push(c.u_s_mm[k]);
-                as_.push(c.a_mm[k]);
+                as_.push(match channel {
+                    Channel::Radius => c.a_mm[k],
+                    Channel::Load => c.load_n[k],
+                });
             }
         }
         if us.len() < 3 || u <= us[0] || u >= us[us.len() - 1] {
@@ -257,10 +294,11 @@ impl<'a> Model<'a> {
         out
     }
 
-    /// d a / d u_s of the baseline (central difference), for the u_s-offset noise term.
-    pub fn slope_da_du(&self, e: f64, p: f64, u: f64) -> f64 {
+    /// d(channel)/du_s of the baseline (central difference), for the u_s-offset noise term.
+    pub fn slope(&self, channel: Channel, e: f64, p: f64, u: f64) -> f64 {
         let h = 0.01;
-        (self.base.sample(e, p, u + h).a_mm - self.base.sample(e, p, (u - h).max(0.0)).a_mm)
+        (channel.of(&self.base.sample(e, p, u + h))
+            - channel.of(&self.base.sample(e, p, (u - h).max(0.0))))
             / (u + h - (u - h).max(0.0))
     }
 }

@@ -30,7 +30,7 @@
 //! sum_k h_k(u_i) h_k(u_j) sigma_k^2. sigma_k is the leave-one-out PCHIP error across the
 //! modulus nodes next to the estimate at u_k, scaled by `LUT_ERROR_SCALE` (calibrated
 //! against direct solves between the nodes). Along u_s the table's PCHIP differs from the
-//! chord through the steps by |PCHIP - chord| ([`Model::u_interpolation_error_mm`]), a
+//! chord through the steps by |PCHIP - chord| ([`Model::u_interpolation_error`]), a
 //! term fully correlated within one step interval and independent between intervals.
 //! A smooth (exponential) correlation for these terms would make the alternating structure
 //! look impossible and amplify it in the whitened residuals.
@@ -43,7 +43,7 @@ use serde::Serialize;
 
 use super::data::Point;
 use super::linalg;
-use super::model::Model;
+use super::model::{Channel, Model};
 
 /// Interpolation error at a query over the leave-one-out error at the nearest node (both
 /// RMS over load steps): for a smooth PCHIP it would be ~1/8 (O(h^3), spacing doubled), but
@@ -103,6 +103,11 @@ fn bins_of(us: &[f64], k: usize) -> Vec<usize> {
 /// modulus node nearest to `e` from its neighbours (two on each side where they reach u_s)
 /// minus the node's own value, in absolute value (mm; 0 where it cannot be formed).
 pub fn lut_loo_error_mm(model: &Model<'_>, e: f64, p: f64, u: f64) -> f64 {
+    lut_loo_error(model, Channel::Radius, e, p, u)
+}
+
+/// [`lut_loo_error_mm`] of either channel (mm for the radius, N for the load).
+pub fn lut_loo_error(model: &Model<'_>, channel: Channel, e: f64, p: f64, u: f64) -> f64 {
     let nodes = model.base.moduli_kpa();
     let n = nodes.len();
     if n < 4 {
@@ -137,10 +142,10 @@ pub fn lut_loo_error_mm(model: &Model<'_>, e: f64, p: f64, u: f64) -> f64 {
     let xs: Vec<f64> = idx.iter().map(|&j| nodes[j].ln()).collect();
     let ys: Vec<f64> = idx
         .iter()
-        .map(|&j| model.base.sample(nodes[j], p, u).a_mm)
+        .map(|&j| channel.of(&model.base.sample(nodes[j], p, u)))
         .collect();
     let (pred, _) = fem_core::lut::pchip::eval(&xs, &ys, nodes[k].ln());
-    let truth = model.base.sample(nodes[k], p, u).a_mm;
+    let truth = channel.of(&model.base.sample(nodes[k], p, u));
     (pred - truth).abs()
 }
 
@@ -149,10 +154,20 @@ pub fn lut_loo_error_mm(model: &Model<'_>, e: f64, p: f64, u: f64) -> f64 {
 /// two neighbours on each side: the pointwise |LOO| passes through zero where the wiggle
 /// does, not where the error is small.
 pub fn table_error_knots(model: &Model<'_>, e: f64, p: f64) -> (Vec<f64>, Vec<f64>) {
+    table_error_knots_of(model, Channel::Radius, e, p)
+}
+
+/// [`table_error_knots`] of either channel.
+pub fn table_error_knots_of(
+    model: &Model<'_>,
+    channel: Channel,
+    e: f64,
+    p: f64,
+) -> (Vec<f64>, Vec<f64>) {
     let u = model.step_knots_mm(e, p);
     let loo: Vec<f64> = u
         .iter()
-        .map(|&uk| lut_loo_error_mm(model, e, p, uk))
+        .map(|&uk| lut_loo_error(model, channel, e, p, uk))
         .collect();
     let n = loo.len();
     let rms = (0..n)
@@ -174,17 +189,22 @@ struct LutTerm {
 }
 
 /// Table-error terms of `points` at modulus `e`; knot standard deviations per pressure.
-fn lut_terms(model: &Model<'_>, points: &[Point], e: f64) -> (Vec<LutTerm>, Vec<(f64, Vec<f64>)>) {
+fn lut_terms(
+    model: &Model<'_>,
+    channel: Channel,
+    points: &[Point],
+    e: f64,
+) -> (Vec<LutTerm>, Vec<(f64, Vec<f64>)>) {
     let mut knots_at: Vec<(f64, Vec<f64>, Vec<f64>)> = Vec::new();
     for p in super::data::pressures(points) {
-        let (u, loo) = table_error_knots(model, e, p);
+        let (u, loo) = table_error_knots_of(model, channel, e, p);
         let sigma = loo.iter().map(|l| LUT_ERROR_SCALE * l).collect();
         knots_at.push((p, u, sigma));
     }
     let terms = points
         .iter()
         .map(|pt| {
-            let along_u_mm = model.u_interpolation_error_mm(e, pt.p_air_kpa, pt.u_s_mm);
+            let along_u_mm = model.u_interpolation_error(channel, e, pt.p_air_kpa, pt.u_s_mm);
             let Some((_, u, _)) = knots_at.iter().find(|k| k.0 == pt.p_air_kpa) else {
                 return LutTerm {
                     knots: [(0, 0.0), (0, 0.0)],
@@ -219,11 +239,23 @@ impl NoiseModel {
     /// Estimates the model from the baseline residuals `r` (a_meas - a_model) at modulus
     /// `e` for `points` (sorted by pressure, test, u_s).
     pub fn estimate(model: &Model<'_>, points: &[Point], r: &[f64], e: f64) -> Self {
+        Self::estimate_channel(model, Channel::Radius, points, r, e)
+    }
+
+    /// The same model for either channel (the load channel's values are in N, its u_s terms
+    /// enter through dP/du_s): residuals `r` of `channel` at modulus `e`.
+    pub fn estimate_channel(
+        model: &Model<'_>,
+        channel: Channel,
+        points: &[Point],
+        r: &[f64],
+        e: f64,
+    ) -> Self {
         let slope: Vec<f64> = points
             .iter()
-            .map(|p| model.slope_da_du(e, p.p_air_kpa, p.u_s_mm))
+            .map(|p| model.slope(channel, e, p.p_air_kpa, p.u_s_mm))
             .collect();
-        let (lut, knot_sigma) = lut_terms(model, points, e);
+        let (lut, knot_sigma) = lut_terms(model, channel, points, e);
         let mut pressures = Vec::new();
         for p in super::data::pressures(points) {
             let idx: Vec<usize> = (0..points.len())

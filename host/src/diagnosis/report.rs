@@ -59,6 +59,28 @@ pub fn text(d: &Diagnosis) -> String {
             if n.assumed { " [assumed]" } else { "" }
         );
     }
+    if let Some(lc) = &d.load_channel {
+        let _ = writeln!(
+            s,
+            "load channel (P–u_s, each refit's load prediction is scored; baseline chi2 {:.1} on {} points):",
+            lc.baseline_chi2, lc.points
+        );
+        for n in &lc.noise_model {
+            let _ = writeln!(
+                s,
+                "  {:>5.1} kPa: white {:.2} mN + {:.4} mm in u_s; per-test offset {:.2} mN + {:.4} mm in u_s; smooth {:.2} mN + {:.4} mm in u_s (l = {:.2} mm); table interpolation {:.2} mN rms",
+                n.p_air_kpa,
+                1e3 * n.white_mm,
+                n.white_u_mm,
+                1e3 * n.test_offset_a_mm,
+                n.test_offset_u_mm,
+                1e3 * n.smooth_mm,
+                n.smooth_u_mm,
+                n.smooth_length_mm,
+                1e3 * n.lut_rms_mm,
+            );
+        }
+    }
     let l = &d.localisation;
     let _ = writeln!(
         s,
@@ -115,22 +137,29 @@ pub fn text(d: &Diagnosis) -> String {
     }
     let _ = writeln!(
         s,
-        "\ncandidates (threshold: 95th percentile of the largest null improvement = {:.2}, {} bootstrap draws):",
+        "\ncandidates (chi2 improvements; threshold: 95th percentile of the largest null improvement = {:.2}, {} bootstrap draws; ranked by the refit plus the load prediction):",
         d.threshold.delta_chi2_95, d.threshold.replicates
     );
     for c in &d.candidates {
         let _ = writeln!(
             s,
-            "  {:<34} screen {:>9.2}  refit {:>9}  AIC {:>10}  BIC {:>10}  held-out {}{}",
+            "  {:<34} screen {:>9.2}  refit {:>9}{}  AIC {:>10}  BIC {:>10}  held-out {}{}",
             c.label,
             c.screen_delta_chi2,
             c.delta_chi2.map_or("-".into(), |v| format!("{v:.2}")),
+            c.delta_load_chi2
+                .map_or(String::new(), |v| format!("  load {v:>9.2}")),
             c.aic.map_or("-".into(), |v| format!("{v:.1}")),
             c.bic.map_or("-".into(), |v| format!("{v:.1}")),
             c.held_out.as_ref().map_or("-".into(), |h| format!(
-                "{:.1} vs baseline {:.1} (margin {:.1}){}",
+                "{:.1} vs baseline {:.1}{} (gain {:.1}, margin {:.1}){}",
                 h.candidate_chi2,
                 h.baseline_chi2,
+                match (h.load_candidate_chi2, h.load_baseline_chi2) {
+                    (Some(c), Some(b)) => format!(", load {c:.1} vs {b:.1}"),
+                    _ => String::new(),
+                },
+                h.gain(),
                 h.margin_chi2,
                 if h.confirms {
                     " (confirms)"

@@ -30,7 +30,8 @@ use serde::Serialize;
 use super::candidates::Candidate;
 use super::data::Point;
 use super::fitting::{GlsFit, fit};
-use super::model::Model;
+use super::load_channel::LoadChannel;
+use super::model::{Channel, Model};
 use super::noise_model::NoiseModel;
 use super::signatures::Signature;
 use super::stats::{Gauss, quantile};
@@ -70,6 +71,12 @@ pub struct HeldOut {
     pub baseline_chi2: f64,
     pub candidate_chi2: f64,
     pub points: usize,
+    /// With loads: the load channel predicted from fits to the contact radius alone (data the
+    /// fits never saw), chi^2 of the baseline's and the candidate's prediction.
+    pub load_baseline_chi2: Option<f64>,
+    pub load_candidate_chi2: Option<f64>,
+    /// Loads predicted (0 without a load channel).
+    pub load_points: usize,
     /// Improvement (baseline - candidate) the candidate must exceed: the bootstrap's 95th
     /// percentile under the baseline ([`held_out_margin`]); 0 when not calibrated.
     pub margin_chi2: f64,
@@ -149,7 +156,29 @@ fn predict_chi2(
     Some(w.whiten(&r).iter().map(|v| v * v).sum())
 }
 
-/// Held-out check of `cand` against the baseline.
+impl HeldOut {
+    /// Baseline minus candidate chi^2 over the held-out parts (both channels).
+    pub fn gain(&self) -> f64 {
+        self.baseline_chi2 - self.candidate_chi2 + self.load_baseline_chi2.unwrap_or(0.0)
+            - self.load_candidate_chi2.unwrap_or(0.0)
+    }
+
+    /// Held-out chi^2 per predicted value over both channels, of the baseline or the
+    /// candidate.
+    pub fn chi2_per_point(&self, candidate: bool) -> f64 {
+        let total = if candidate {
+            self.candidate_chi2 + self.load_candidate_chi2.unwrap_or(0.0)
+        } else {
+            self.baseline_chi2 + self.load_baseline_chi2.unwrap_or(0.0)
+        };
+        total / (self.points + self.load_points).max(1) as f64
+    }
+}
+
+/// Held-out check of `cand` against the baseline: the split of the radius channel
+/// ([`splits`]) and, with a load channel, the loads predicted by fits to all of the
+/// radius channel.
+#[allow(clippy::too_many_arguments)]
 pub fn held_out(
     model: &Model<'_>,
     cand: &Candidate,
@@ -158,6 +187,7 @@ pub fn held_out(
     noise: &NoiseModel,
     e0: f64,
     theta0: f64,
+    load: Option<&LoadChannel>,
 ) -> Option<HeldOut> {
     let (scheme, sp) = splits(points, subset, cand.kind.needs_all_pressures());
     let (mut base, mut candc, mut n) = (0.0, 0.0, 0);
@@ -183,14 +213,31 @@ pub fn held_out(
     if n == 0 {
         return None;
     }
-    Some(HeldOut {
-        scheme,
+    let (mut load_b, mut load_c) = (None, None);
+    if let Some(lc) = load {
+        let w = noise.whitener(points, subset)?;
+        let fb = fit(model, None, points, subset, &w, e0, 0.0, 30)?;
+        let fc = fit(model, Some(cand), points, subset, &w, e0, theta0, 30)?;
+        load_b = Some(lc.chi2(model, None, points, subset, fb.modulus_kpa, 0.0)?);
+        load_c = Some(lc.chi2(model, Some(cand), points, subset, fc.modulus_kpa, fc.theta)?);
+    }
+    let mut h = HeldOut {
+        scheme: if load.is_some() {
+            format!("{scheme}; fit a, predict the load")
+        } else {
+            scheme
+        },
         baseline_chi2: base,
         candidate_chi2: candc,
         points: n,
+        load_baseline_chi2: load_b,
+        load_candidate_chi2: load_c,
+        load_points: load.map_or(0, |lc| lc.whitener.len()),
         margin_chi2: 0.0,
-        confirms: candc < base,
-    })
+        confirms: false,
+    };
+    h.confirms = h.gain() > 0.0;
+    Some(h)
 }
 
 /// Draws of the held-out bootstrap (the 95th percentile of 20 draws lies between the two
@@ -201,10 +248,11 @@ pub const HELD_OUT_DRAWS: usize = 20;
 
 /// Null distribution of the held-out improvement of `cand`: `draws` data sets simulated
 /// from the baseline fit `base` (modulus `base.modulus_kpa`) plus noise coloured by
-/// `whitener`; on each the noise model is re-estimated from the simulated replicates
-/// ([`NoiseModel::estimate`], as the diagnosis does on the measurement) and the held-out
-/// check rerun. Returns the 95th percentile of baseline - candidate chi^2, or None when
-/// fewer than half the draws could be evaluated.
+/// `whitener` (and, with a load channel, loads from the baseline plus noise coloured by its
+/// whitener); on each the noise models are re-estimated from the simulated replicates
+/// ([`NoiseModel::estimate`], [`LoadChannel::new`], as the diagnosis does on the
+/// measurement) and the held-out check rerun. Returns the 95th percentile of the held-out
+/// gain ([`HeldOut::gain`]), or None when fewer than half the draws could be evaluated.
 #[allow(clippy::too_many_arguments)]
 pub fn held_out_margin(
     model: &Model<'_>,
@@ -216,29 +264,52 @@ pub fn held_out_margin(
     theta0: f64,
     draws: usize,
     seed: u64,
+    load: Option<&LoadChannel>,
 ) -> Option<f64> {
     let e = base.modulus_kpa;
     let f0: Vec<f64> = points
         .iter()
         .map(|p| super::candidates::predict_a(model, None, e, 0.0, p))
         .collect();
+    let f0_load: Vec<f64> = points
+        .iter()
+        .map(|p| super::candidates::predict(model, None, e, 0.0, p, Channel::Load))
+        .collect();
     let mut g = Gauss::new(seed);
     let mut gains = Vec::with_capacity(draws);
     for _ in 0..draws {
         let z: Vec<f64> = (0..whitener.len()).map(|_| g.normal()).collect();
         let v = whitener.colour(&z, points.len());
+        let v_load = load.map(|lc| {
+            let z: Vec<f64> = (0..lc.whitener.len()).map(|_| g.normal()).collect();
+            lc.whitener.colour(&z, points.len())
+        });
         let sim: Vec<Point> = points
             .iter()
             .enumerate()
             .map(|(i, p)| Point {
                 a_mm: f0[i] + v[i],
+                load_n: v_load.as_ref().map(|vl| f0_load[i] + vl[i]).or(p.load_n),
                 ..*p
             })
             .collect();
         // residuals against the baseline at the simulated truth are the noise itself
         let noise_b = NoiseModel::estimate(model, &sim, &v, e);
-        if let Some(h) = held_out(model, cand, &sim, subset, &noise_b, e, theta0) {
-            gains.push(h.baseline_chi2 - h.candidate_chi2);
+        let load_b = load.and_then(|_| LoadChannel::new(model, &sim, subset, e));
+        if load.is_some() && load_b.is_none() {
+            continue;
+        }
+        if let Some(h) = held_out(
+            model,
+            cand,
+            &sim,
+            subset,
+            &noise_b,
+            e,
+            theta0,
+            load_b.as_ref(),
+        ) {
+            gains.push(h.gain());
         }
     }
     if gains.len() * 2 < draws.max(1) {
@@ -263,6 +334,20 @@ pub struct Screened {
     pub bic: Option<f64>,
     pub held_out: Option<HeldOut>,
     pub passes_threshold: bool,
+    /// chi^2 of the load channel predicted at the a-channel fit ([`super::load_channel`]);
+    /// None without loads.
+    pub load_chi2: Option<f64>,
+    /// Baseline minus candidate chi^2 of the load channel.
+    pub delta_load_chi2: Option<f64>,
+}
+
+impl Screened {
+    /// chi^2 of the refit over both channels (the ranking key; infinite when not refitted).
+    pub fn total_chi2(&self) -> f64 {
+        self.fit
+            .as_ref()
+            .map_or(f64::INFINITY, |f| f.chi2 + self.load_chi2.unwrap_or(0.0))
+    }
 }
 
 /// Screens every candidate and fully refits the best `refit` (always including the best
@@ -277,6 +362,7 @@ pub fn screen_and_refit(
     base: &GlsFit,
     threshold: f64,
     refit: usize,
+    load: Option<&LoadChannel>,
 ) -> Vec<Screened> {
     let mut out: Vec<Screened> = sigs
         .iter()
@@ -296,6 +382,8 @@ pub fn screen_and_refit(
             bic: None,
             held_out: None,
             passes_threshold: false,
+            load_chi2: None,
+            delta_load_chi2: None,
         })
         .collect();
     out.sort_by(|a, b| b.screen_delta_chi2.total_cmp(&a.screen_delta_chi2));
@@ -337,16 +425,30 @@ pub fn screen_and_refit(
             s.aic = Some(f.chi2 + 2.0 * f.parameters as f64);
             s.bic = Some(f.chi2 + f.parameters as f64 * n.ln());
             s.passes_threshold = d > threshold;
+            if let Some(lc) = load {
+                let l = lc
+                    .chi2(
+                        model,
+                        Some(&s.candidate),
+                        points,
+                        subset,
+                        f.modulus_kpa,
+                        f.theta,
+                    )
+                    .unwrap_or(lc.baseline_chi2);
+                s.load_chi2 = Some(l);
+                s.delta_load_chi2 = Some(lc.baseline_chi2 - l);
+            }
             s.fit = Some(f);
         }
         if !refitted_kinds.contains(&s.candidate.kind) {
             refitted_kinds.push(s.candidate.kind);
         }
     }
+    // refitted first, best over both channels first (the a channel alone without loads)
     out.sort_by(|a, b| {
-        b.delta_chi2
-            .unwrap_or(f64::NEG_INFINITY)
-            .total_cmp(&a.delta_chi2.unwrap_or(f64::NEG_INFINITY))
+        a.total_chi2()
+            .total_cmp(&b.total_chi2())
             .then(b.screen_delta_chi2.total_cmp(&a.screen_delta_chi2))
     });
     out

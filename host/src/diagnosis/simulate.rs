@@ -11,7 +11,9 @@
 //! (~0.012 mm) at noise level 1: per frame (30 fps, stage at 1 mm/s from contact) white
 //! noise on a (0.004 mm: vision and frame timing) and on u_s (0.004 mm: proximity sensor),
 //! per indentation a u_s tare offset (0.004 mm) and an a offset (0.002 mm), and a smooth
-//! Ornstein–Uhlenbeck drift of u_s (0.004 mm rms, time constant 0.3 s). The `test` column
+//! Ornstein–Uhlenbeck drift of u_s (0.004 mm rms, time constant 0.3 s); on the load, the
+//! load cell's white noise (hil-sim's 40 counts at its 0.438 counts/uN: 0.09 mN) and a tare
+//! error per indentation (0.03 mN, the mean of the pre-contact samples). The `test` column
 //! marks the replicates; `p_air_kpa` is the set point (the manometer's reading).
 
 use hil_sim::effects::{EffectState, EffectsConfig, ViscoelasticConfig};
@@ -82,7 +84,9 @@ pub fn sizes(kind: EffectKind) -> [f64; 2] {
         EffectKind::RadiusOffset => [0.02, 0.05],
         EffectKind::RadiusScale => [0.015, 0.04],
         EffectKind::DisplacementOffset => [0.02, 0.06],
-        EffectKind::PressureOffset => [0.5, 1.5],
+        // the baseline table covers true pressures 4-8 and 13-17 kPa: offsets up to 2 kPa of
+        // the 6 and 15 kPa set points (minimum detectable ~1.4 kPa at noise 1)
+        EffectKind::PressureOffset => [1.0, 2.0],
     }
 }
 
@@ -142,20 +146,83 @@ pub fn truth_scenario(spec: &SimSpec) -> Scenario {
     s
 }
 
-/// The truth mechanics of a scenario (the expensive part: fem-core solves).
-pub fn truth_mechanics(
-    scenario: &Scenario,
-) -> Result<Box<dyn MechanicsModel>, hil_sim::mechanics_source::MechanicsSourceError> {
-    hil_sim::mechanics_source::build_mechanics(scenario)
+/// The truth's mechanics and how far its curves reach.
+pub struct Truth {
+    pub mechanics: Box<dyn MechanicsModel>,
+    /// Tube travel every truth curve reached (mm): a curve that stops converging near the
+    /// end of the travel (a soft or thin sample, a low pressure) is kept up to its last
+    /// converged step, as the tables keep theirs, and the simulated ramp stops there.
+    pub reached_travel_mm: f64,
+}
+
+impl std::fmt::Debug for Truth {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Truth")
+            .field("reached_travel_mm", &self.reached_travel_mm)
+            .finish_non_exhaustive()
+    }
+}
+
+/// The truth mechanics of a scenario (the expensive part: fem-core solves, each kept up to
+/// its last converged step, [`fem_core::solve_curve_partial`]).
+pub fn truth_mechanics(scenario: &Scenario) -> Result<Truth, String> {
+    let MechanicsSource::Solve {
+        pressures_kpa,
+        modulus_factors,
+        mesh_level,
+        steps,
+        max_depth_mm,
+    } = &scenario.mechanics
+    else {
+        let mechanics =
+            hil_sim::mechanics_source::build_mechanics(scenario).map_err(|e| e.to_string())?;
+        return Ok(Truth {
+            mechanics,
+            reached_travel_mm: f64::INFINITY,
+        });
+    };
+    let mut curves = Vec::new();
+    let mut reached = f64::INFINITY;
+    for &factor in modulus_factors {
+        for &p in pressures_kpa {
+            let params = fem_core::CurveParams {
+                sample_modulus_kpa: scenario.sample.modulus_kpa * factor,
+                pressure_kpa: p,
+                max_depth_mm: *max_depth_mm,
+                steps: *steps,
+                mesh_level: *mesh_level,
+                ..hil_sim::mechanics_source::sample_params(&scenario.sample)
+            };
+            let (curve, _stop) = fem_core::solve_curve_partial(&params).map_err(|e| {
+                format!(
+                    "fem-core solve at E2 = {:.4} kPa, p_air = {p} kPa failed: {e}",
+                    params.sample_modulus_kpa
+                )
+            })?;
+            let last = curve.points.last().map_or(0.0, |q| q.h_mm);
+            reached = reached.min(last);
+            curves.push(curve);
+        }
+    }
+    let mechanics = hil_sim::mechanics::CurveMechanics::new(&curves).map_err(|e| e.to_string())?;
+    if scenario.effects.needs_modulus_axis() && !mechanics.has_modulus_axis() {
+        return Err("the viscoelastic truth needs curves at several moduli".into());
+    }
+    Ok(Truth {
+        mechanics: Box::new(mechanics),
+        reached_travel_mm: reached,
+    })
 }
 
 /// Simulates the experiment with prebuilt mechanics of `truth_scenario(spec)`.
-pub fn simulate_with(spec: &SimSpec, scenario: &Scenario, mech: &dyn MechanicsModel) -> Vec<Point> {
+pub fn simulate_with(spec: &SimSpec, scenario: &Scenario, truth: &Truth) -> Vec<Point> {
+    let mech = truth.mechanics.as_ref();
     let cfg = &scenario.effects;
     let mut rng = SimRng::stream(spec.seed, "diagnosis-noise");
     let n = spec.noise;
     let (white_a, white_u, tare_u, off_a, drift_u, drift_tau) =
         (0.004 * n, 0.004 * n, 0.004 * n, 0.002 * n, 0.004 * n, 0.3);
+    let (white_load_n, tare_load_n) = (0.09e-3 * n, 0.03e-3 * n);
     let dt = 1.0 / spec.fps;
     let substeps = 10;
     let mut out = Vec::new();
@@ -172,9 +239,11 @@ pub fn simulate_with(spec: &SimSpec, scenario: &Scenario, mech: &dyn MechanicsMo
             let mut state = EffectState::default();
             let tare = rng.normal(tare_u);
             let a_off = rng.normal(off_a);
+            let load_tare = rng.normal(tare_load_n);
             let mut drift = rng.normal(drift_u);
             let decay = (-dt / drift_tau).exp();
-            let frames = (spec.max_travel_mm / spec.speed_mm_per_s * spec.fps).floor() as usize;
+            let travel_mm = spec.max_travel_mm.min(truth.reached_travel_mm);
+            let frames = (travel_mm / spec.speed_mm_per_s * spec.fps).floor() as usize;
             let mut h_prev = 0.0;
             for k in 1..=frames {
                 let t = k as f64 * dt;
@@ -206,7 +275,7 @@ pub fn simulate_with(spec: &SimSpec, scenario: &Scenario, mech: &dyn MechanicsMo
                     a_mm: a + a_off + rng.normal(white_a),
                     p_air_kpa: p_set,
                     test: test as u32,
-                    load_n: Some(cs.load_n),
+                    load_n: Some(cs.load_n + load_tare + rng.normal(white_load_n)),
                     t_s: Some(t),
                     h_mm: Some(h),
                 });
@@ -219,8 +288,8 @@ pub fn simulate_with(spec: &SimSpec, scenario: &Scenario, mech: &dyn MechanicsMo
 /// Builds the truth and simulates (one call).
 pub fn simulate(spec: &SimSpec) -> Result<Vec<Point>, String> {
     let scenario = truth_scenario(spec);
-    let mech = truth_mechanics(&scenario).map_err(|e| e.to_string())?;
-    Ok(simulate_with(spec, &scenario, mech.as_ref()))
+    let truth = truth_mechanics(&scenario)?;
+    Ok(simulate_with(spec, &scenario, &truth))
 }
 
 /// Points as curve CSV text (one file, `test` column for replicates).

@@ -2,7 +2,8 @@
 //!
 //! - `effect`: the best candidate beats the bootstrap threshold, the held-out check confirms
 //!   it, and no candidate of another effect fits nearly as well;
-//! - `ambiguous`: several effects pass and their chi^2 differ by less than
+//! - `ambiguous`: several effects pass and their chi^2 (a channel plus the load channel's
+//!   prediction when loads are present, [`super::load_channel`]) differ by less than
 //!   [`AMBIGUITY_DELTA_CHI2`] (a likelihood ratio below e^2 ~ 7): the group is reported;
 //! - `unexplained`: the baseline's lack of fit is significant (p < 0.01) but no candidate
 //!   passes, or the best leaves a significant lack of fit (p < 0.001) while shrinking the
@@ -104,19 +105,15 @@ pub fn decide(
             group: Vec::new(),
         };
     };
-    let best_chi2 = screened[best]
-        .fit
-        .as_ref()
-        .map_or(f64::INFINITY, |f| f.chi2);
+    // over both channels when loads are present (the list is sorted by it)
+    let best_chi2 = screened[best].total_chi2();
     let mut group: Vec<String> = Vec::new();
     for &i in &passing[1..] {
         let s = &screened[i];
         if s.candidate.kind == screened[best].candidate.kind || group.contains(&s.effect) {
             continue;
         }
-        if let Some(f) = &s.fit
-            && f.chi2 - best_chi2 < AMBIGUITY_DELTA_CHI2
-        {
+        if s.fit.is_some() && s.total_chi2() - best_chi2 < AMBIGUITY_DELTA_CHI2 {
             group.push(s.effect.clone());
         }
     }
