@@ -99,7 +99,7 @@ fn camera_radius_offset_is_named_and_the_gap_shrinks() {
 }
 
 #[test]
-#[ignore = "minutes in release (friction solves); FAILS today at friction (named radius_scale at noise 1) and pressure_offset (below its minimum detectable size or taken for finite_thickness; README Diagnosis); run with --release -- --ignored --nocapture"]
+#[ignore = "90 s in release (friction solves); run with --release -- --ignored --nocapture"]
 fn every_effect_at_a_clear_size_is_named_and_the_gap_shrinks() {
     // every effect is checked (a failure is reported, not the end of the run)
     let failed: Vec<&str> = EffectKind::ALL
