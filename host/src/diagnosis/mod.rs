@@ -99,6 +99,9 @@ pub struct GapSummary {
     /// Held-out whitened chi^2 per predicted value (of the winning candidate's check: both
     /// channels when loads are present).
     pub held_out_chi2_per_point: Option<f64>,
+    /// chi^2 per value of the load channel predicted by this fit to the radius (None
+    /// without loads).
+    pub load_chi2_per_point: Option<f64>,
 }
 
 impl GapSummary {
@@ -112,6 +115,7 @@ impl GapSummary {
             rms_residual_mm: f.rms_residual_mm,
             worst_whitened: f.whitened.iter().fold(0.0, |m: f64, v| m.max(v.abs())),
             held_out_chi2_per_point: held,
+            load_chi2_per_point: None,
         }
     }
 }
@@ -510,16 +514,21 @@ pub fn diagnose(
 
     // 7. gap before and after
     let held = winner.as_ref().and_then(|w| w.held_out.clone());
-    let baseline = GapSummary::of(
-        "baseline",
-        &base_fit,
-        held.as_ref().map(|h| h.chi2_per_point(false)),
-    );
+    let load_values = load.as_ref().map_or(0, |lc| lc.whitener.len()).max(1) as f64;
+    let baseline = GapSummary {
+        load_chi2_per_point: load.as_ref().map(|lc| lc.baseline_chi2 / load_values),
+        ..GapSummary::of(
+            "baseline",
+            &base_fit,
+            held.as_ref().map(|h| h.chi2_per_point(false)),
+        )
+    };
     let named = matches!(decision.verdict, Verdict::Effect | Verdict::Ambiguous);
     let augmented = if named {
         winner.as_ref().and_then(|w| {
-            w.fit.as_ref().map(|f| {
-                GapSummary::of(
+            w.fit.as_ref().map(|f| GapSummary {
+                load_chi2_per_point: w.load_chi2.map(|l| l / load_values),
+                ..GapSummary::of(
                     &w.label,
                     f,
                     w.held_out.as_ref().map(|h| h.chi2_per_point(true)),

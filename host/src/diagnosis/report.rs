@@ -196,7 +196,7 @@ pub fn text(d: &Diagnosis) -> String {
     for g in rows {
         let _ = writeln!(
             s,
-            "  {:<34} E2 = {:>7.1} kPa ({:.1} .. {:.1})  chi2/dof {:>8.3}  RMS {:.4} mm  worst |w| {:.2}  held-out chi2/point {}",
+            "  {:<34} E2 = {:>7.1} kPa ({:.1} .. {:.1})  chi2/dof {:>8.3}  RMS {:.4} mm  worst |w| {:.2}  held-out chi2/point {}{}",
             g.model,
             g.modulus_kpa,
             g.ci95_kpa[0],
@@ -205,7 +205,9 @@ pub fn text(d: &Diagnosis) -> String {
             g.rms_residual_mm,
             g.worst_whitened,
             g.held_out_chi2_per_point
-                .map_or("-".into(), |v| format!("{v:.3}"))
+                .map_or("-".into(), |v| format!("{v:.3}")),
+            g.load_chi2_per_point
+                .map_or(String::new(), |v| format!("  load chi2/value {v:.3}"))
         );
     }
     if let Some(gs) = d.gap_shrink {
