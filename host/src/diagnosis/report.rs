@@ -29,7 +29,17 @@ pub fn text(d: &Diagnosis) -> String {
     }
     if let Some(obj) = d.parameters.as_object() {
         for (k, v) in obj {
-            let _ = writeln!(s, "  {k} = {v}");
+            match (
+                v.get("value").and_then(serde_json::Value::as_f64),
+                v.get("se").and_then(serde_json::Value::as_f64),
+            ) {
+                (Some(x), Some(se)) => {
+                    let _ = writeln!(s, "  {k} = {x:.4} +- {se:.4} (1 se)");
+                }
+                _ => {
+                    let _ = writeln!(s, "  {k} = {v}");
+                }
+            }
         }
     }
     let _ = writeln!(
