@@ -1,0 +1,199 @@
+//! `tactile diagnose` as a user runs it: bad input named, the documented JSON object, the
+//! `unexplained` verdict, and the assumed noise model without replicates. The data are
+//! generated from the shipped effect tables with known noise (no FE solve), written as
+//! curve CSV files.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use host::diagnosis::candidates::{Candidate, EffectKind, predict};
+use host::diagnosis::data::Point;
+use host::diagnosis::model::{Channel, Model};
+use host::diagnosis::stats::Gauss;
+use host::diagnosis::tables::{EffectAxis, read_effect_table, shipped_tables_dir, sub_table};
+
+fn tactile() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_tactile"))
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!(
+        "tactile-diagnose-cli-{}-{name}",
+        std::process::id()
+    ));
+    std::fs::create_dir_all(&dir).expect("scratch dir");
+    dir
+}
+
+/// Curves at 6 and 15 kPa from the base table at 170 kPa with `effect` (a candidate at
+/// theta) and `extra(u_s)` added to a; `replicates` per pressure; white noise 4 um on a,
+/// 1 mN on the load, per-test offsets 2 um and 1 mN.
+fn write_curves(
+    path: &Path,
+    effect: Option<(EffectKind, f64)>,
+    extra: impl Fn(f64) -> f64,
+    replicates: u32,
+    seed: u64,
+) {
+    let effects: Vec<_> = EffectAxis::ALL
+        .iter()
+        .map(|a| read_effect_table(&shipped_tables_dir().join(a.file_name())).expect("tables"))
+        .collect();
+    let t = &effects[0];
+    let base = sub_table(&t.lut, &t.axis.select(t.axis.base_value())).expect("base slice");
+    let model = Model::new(&base, &effects).expect("model");
+    let cand = effect.map(|(kind, _)| Candidate {
+        kind,
+        tau_h_mm: None,
+    });
+    let theta = effect.map_or(0.0, |e| e.1);
+    let mut g = Gauss::new(seed);
+    let mut points = Vec::new();
+    for p in [6.0, 15.0] {
+        for test in 0..replicates {
+            let (off_a, off_load) = (0.002 * g.normal(), 1e-3 * g.normal());
+            for k in 0..45 {
+                let mut pt = Point {
+                    u_s_mm: 0.1 + 1.1 * f64::from(k) / 44.0,
+                    a_mm: 0.0,
+                    p_air_kpa: p,
+                    test,
+                    load_n: None,
+                    t_s: None,
+                    h_mm: None,
+                };
+                let a = predict(&model, cand.as_ref(), 170.0, theta, &pt, Channel::Radius);
+                let load = predict(&model, cand.as_ref(), 170.0, theta, &pt, Channel::Load);
+                pt.a_mm = a + extra(pt.u_s_mm) + off_a + 0.004 * g.normal();
+                pt.load_n = Some(load + off_load + 1e-3 * g.normal());
+                points.push(pt);
+            }
+        }
+    }
+    let text = host::diagnosis::simulate::to_curve_csv(&points, "diagnose_cli test").expect("csv");
+    std::fs::write(path, text).expect("write csv");
+}
+
+fn diagnose_json(file: &Path) -> serde_json::Value {
+    let out = tactile()
+        .args(["diagnose", "--json", "--bootstrap", "100", "--reruns", "3"])
+        .arg(file)
+        .output()
+        .expect("run tactile");
+    assert!(
+        out.status.success(),
+        "tactile diagnose failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).expect("one JSON object on stdout")
+}
+
+#[test]
+fn a_missing_file_and_a_curve_without_pressure_are_named() {
+    let out = tactile()
+        .args(["diagnose", "/nonexistent/curve.csv"])
+        .output()
+        .expect("run tactile");
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("/nonexistent/curve.csv"), "{err}");
+
+    let dir = scratch("nopressure");
+    let file = dir.join("no-pressure.csv");
+    std::fs::write(&file, "u_s_mm,a_mm\n0.1,0.5\n0.2,0.7\n0.3,0.9\n").expect("write");
+    let out = tactile().arg("diagnose").arg(&file).output().expect("run");
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("no-pressure.csv") && err.contains("p_air_kpa"),
+        "{err}"
+    );
+}
+
+#[test]
+fn json_carries_the_documented_fields_and_names_a_camera_scale() {
+    let dir = scratch("json");
+    let file = dir.join("scale.csv");
+    // a 3 % camera scale: ~0.03 mm at a = 1 mm, 7x the white noise
+    write_curves(&file, Some((EffectKind::RadiusScale, 0.03)), |_| 0.0, 5, 3);
+    let d = diagnose_json(&file);
+    assert_eq!(d["verdict"], "effect", "{d:#}");
+    assert_eq!(d["effect"], "radius_scale");
+    assert!(d["alternatives"].is_array());
+    assert!(
+        d["confidence"]
+            .as_f64()
+            .is_some_and(|c| (0.0..=1.0).contains(&c))
+    );
+    // the estimate is the injected scale within 3 standard errors
+    let p = &d["parameters"]["radius_scale_minus_1"];
+    let (v, se) = (
+        p["value"].as_f64().expect("value"),
+        p["se"].as_f64().expect("se"),
+    );
+    assert!((v - 0.03).abs() < 3.0 * se.max(1e-4), "{v} +- {se}");
+    for k in ["baseline", "augmented"] {
+        for f in ["modulus_kpa", "chi2_per_dof", "rms_residual_mm"] {
+            assert!(d[k][f].as_f64().is_some(), "{k}.{f} missing");
+        }
+        assert_eq!(d[k]["ci95_kpa"].as_array().map(Vec::len), Some(2));
+    }
+    // the augmented model recovers the true modulus (within its interval, widened by the
+    // half-width again for the table's interpolation error)
+    let ci = &d["augmented"]["ci95_kpa"];
+    let (lo, hi) = (ci[0].as_f64().expect("ci"), ci[1].as_f64().expect("ci"));
+    let half = 0.5 * (hi - lo);
+    assert!(lo - half < 170.0 && 170.0 < hi + half, "{lo} .. {hi}");
+    assert!(d["gap_shrink"].as_f64().is_some_and(|g| g > 1.0));
+    let cells = d["disagreement"].as_array().expect("disagreement");
+    assert!(
+        !cells.is_empty(),
+        "a 3 % scale leaves flagged residual windows"
+    );
+    for c in cells {
+        assert!(c["channel"].is_string() && c["p_air_kpa"].is_number());
+        assert_eq!(c["u_s_range_mm"].as_array().map(Vec::len), Some(2));
+    }
+    assert!(
+        d["load_channel"].is_object(),
+        "loads present: the channel is used"
+    );
+}
+
+#[test]
+fn structure_no_candidate_explains_is_unexplained() {
+    let dir = scratch("unexplained");
+    let file = dir.join("wiggle.csv");
+    // a ripple of 0.3 mm period, 0.02 mm amplitude, common to every replicate: not a
+    // modulus change and not any candidate's signature
+    let ripple = |u: f64| 0.02 * (2.0 * std::f64::consts::PI * u / 0.3).sin();
+    write_curves(&file, None, ripple, 5, 4);
+    let d = diagnose_json(&file);
+    assert_eq!(d["verdict"], "unexplained", "{d:#}");
+    assert!(d["effect"].is_null());
+    let lof_p = d["localisation"]["lack_of_fit"]["p_value"]
+        .as_f64()
+        .expect("lack of fit");
+    assert!(lof_p < 0.01, "lack-of-fit p {lof_p}");
+}
+
+#[test]
+fn without_replicates_the_noise_model_is_assumed_and_said_so() {
+    let dir = scratch("single");
+    let file = dir.join("single.csv");
+    write_curves(&file, None, |_| 0.0, 1, 5);
+    let d = diagnose_json(&file);
+    assert_eq!(d["noise_model_assumed"], true);
+    let notes: Vec<&str> = d["notes"]
+        .as_array()
+        .expect("notes")
+        .iter()
+        .filter_map(serde_json::Value::as_str)
+        .collect();
+    assert!(
+        notes.iter().any(|n| n.contains("assumed")),
+        "no note says the noise model is assumed: {notes:?}"
+    );
+    // one replicate cannot estimate the load noise either: ranked on the radius alone
+    assert!(d["load_channel"].is_null());
+}
