@@ -74,10 +74,14 @@ fn write_curves(
     std::fs::write(path, text).expect("write csv");
 }
 
+/// Runs the diagnosis with `--json --out <file's dir>/out`.
 fn diagnose_json(file: &Path) -> serde_json::Value {
+    let out_dir = file.with_file_name("out");
     let out = tactile()
         .args(["diagnose", "--json", "--bootstrap", "100", "--reruns", "3"])
         .arg(file)
+        .arg("--out")
+        .arg(&out_dir)
         .output()
         .expect("run tactile");
     assert!(
@@ -157,6 +161,25 @@ fn json_carries_the_documented_fields_and_names_a_camera_scale() {
     assert!(
         d["load_channel"].is_object(),
         "loads present: the channel is used"
+    );
+    // --out wrote the report, the same JSON and the residual plots of both channels
+    let out = dir.join("out");
+    let written: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(out.join("diagnosis.json")).expect("diagnosis.json"),
+    )
+    .expect("json");
+    assert_eq!(written["verdict"], d["verdict"]);
+    let svg = std::fs::read_to_string(out.join("residuals.svg")).expect("residuals.svg");
+    assert_eq!(
+        svg.matches("residual a (mm)").count(),
+        2,
+        "one panel per pressure"
+    );
+    assert_eq!(svg.matches("residual load P (mN)").count(), 2);
+    let report = std::fs::read_to_string(out.join("report.txt")).expect("report.txt");
+    assert!(
+        report.contains("verdict: effect — radius_scale"),
+        "{report}"
     );
 }
 

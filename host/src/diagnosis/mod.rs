@@ -172,6 +172,17 @@ pub struct PlotData {
     pub before_mm: Vec<f64>,
     pub after_mm: Option<Vec<f64>>,
     pub after_label: String,
+    /// The load channel's residuals (N), when loads were used.
+    pub load: Option<LoadPlot>,
+}
+
+/// Load residuals for the plots: measured minus predicted by the baseline fit and by the
+/// augmented fit (both fitted to the radius), with the load noise model's sigma.
+#[derive(Debug, Clone, Default)]
+pub struct LoadPlot {
+    pub sigma_n: Vec<f64>,
+    pub before_n: Vec<f64>,
+    pub after_n: Option<Vec<f64>>,
 }
 
 /// The points inside the baseline table's u_s range around modulus `e` (a margin of 3 %
@@ -612,6 +623,32 @@ pub fn diagnose(
             None
         },
         after_label: winner.as_ref().map(|w| w.label.clone()).unwrap_or_default(),
+        load: load.as_ref().map(|lc| {
+            let residuals = |cand: Option<&Candidate>, e: f64, theta: f64| -> Vec<f64> {
+                points
+                    .iter()
+                    .map(|p| {
+                        model::Channel::Load.measured(p)
+                            - candidates::predict(&model, cand, e, theta, p, model::Channel::Load)
+                    })
+                    .collect()
+            };
+            LoadPlot {
+                sigma_n: (0..points.len())
+                    .map(|i| lc.noise.sigma(&points, i))
+                    .collect(),
+                before_n: residuals(None, base_fit.modulus_kpa, 0.0),
+                after_n: if named {
+                    winner.as_ref().and_then(|w| {
+                        w.fit
+                            .as_ref()
+                            .map(|f| residuals(Some(&w.candidate), f.modulus_kpa, f.theta))
+                    })
+                } else {
+                    None
+                },
+            }
+        }),
     };
     Ok(Diagnosis {
         verdict: decision.verdict,

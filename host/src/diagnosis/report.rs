@@ -243,142 +243,163 @@ const W: f64 = 720.0;
 const PANEL_H: f64 = 300.0;
 const M: f64 = 60.0;
 
+/// One channel's residuals for the plot (values in the channel's unit).
+struct Series<'a> {
+    name: &'a str,
+    unit: &'a str,
+    /// Display factor (1e3 shows loads in mN).
+    scale: f64,
+    sigma: &'a [f64],
+    before: &'a [f64],
+    after: Option<&'a [f64]>,
+}
+
 /// Residuals against u_s at each pressure, before (grey) and after (blue) adding the effect,
-/// with the noise model's +-2 sigma band (marginal standard deviation per point).
+/// with the noise model's +-2 sigma band (marginal standard deviation per point): the
+/// contact radius, and the load (predicted by the fits to the radius) when present.
 pub fn residual_svg(plot: &PlotData) -> String {
     let ps = super::data::pressures(&plot.points);
-    let h_total = PANEL_H * ps.len().max(1) as f64;
+    let mut series = vec![Series {
+        name: "a",
+        unit: "mm",
+        scale: 1.0,
+        sigma: &plot.sigma_mm,
+        before: &plot.before_mm,
+        after: plot.after_mm.as_deref(),
+    }];
+    if let Some(l) = &plot.load {
+        series.push(Series {
+            name: "load P",
+            unit: "mN",
+            scale: 1e3,
+            sigma: &l.sigma_n,
+            before: &l.before_n,
+            after: l.after_n.as_deref(),
+        });
+    }
+    let panels = (ps.len() * series.len()).max(1);
+    let h_total = PANEL_H * panels as f64;
     let mut svg = format!(
         r#"<svg xmlns="http://www.w3.org/2000/svg" width="{W}" height="{h_total}" font-family="sans-serif">"#
     );
-    for (k, &p) in ps.iter().enumerate() {
-        let y0 = k as f64 * PANEL_H;
-        let idx: Vec<usize> = plot
-            .subset
-            .iter()
-            .copied()
-            .filter(|&i| plot.points[i].p_air_kpa == p)
-            .collect();
-        if idx.is_empty() {
-            continue;
-        }
-        let umin = idx
-            .iter()
-            .map(|&i| plot.points[i].u_s_mm)
-            .fold(f64::INFINITY, f64::min);
-        let umax = idx
-            .iter()
-            .map(|&i| plot.points[i].u_s_mm)
-            .fold(f64::NEG_INFINITY, f64::max);
-        let mut ymax = idx
-            .iter()
-            .map(|&i| {
-                let after = plot.after_mm.as_ref().map_or(0.0, |a| a[i].abs());
-                plot.before_mm[i]
-                    .abs()
-                    .max(after)
-                    .max(2.0 * plot.sigma_mm[i])
-            })
-            .fold(0.0, f64::max);
-        ymax = (ymax * 1.1).max(1e-4);
-        let px = |u: f64| M + (u - umin) / (umax - umin).max(1e-9) * (W - 1.5 * M);
-        let py = |r: f64| y0 + PANEL_H / 2.0 - r / ymax * (PANEL_H / 2.0 - 0.6 * M);
-        let _ = write!(
-            svg,
-            r##"<rect x="{M}" y="{:.1}" width="{:.1}" height="{:.1}" fill="none" stroke="#444"/>"##,
-            y0 + 0.6 * M,
-            W - 1.5 * M,
-            PANEL_H - 1.2 * M
-        );
-        let _ = write!(
-            svg,
-            r#"<text x="{:.1}" y="{:.1}" font-size="14" text-anchor="middle">residual a (mm) vs u_s (mm) at {p} kPa; grey: baseline, blue: {}; band: +-2 sigma</text>"#,
-            W / 2.0,
-            y0 + 0.4 * M,
-            if plot.after_mm.is_some() {
-                plot.after_label.as_str()
-            } else {
-                "(no effect added)"
+    let mut k = 0;
+    for ser in &series {
+        for &p in &ps {
+            let idx: Vec<usize> = plot
+                .subset
+                .iter()
+                .copied()
+                .filter(|&i| plot.points[i].p_air_kpa == p)
+                .collect();
+            if !idx.is_empty() {
+                panel(&mut svg, k as f64 * PANEL_H, plot, ser, p, &idx);
             }
-        );
-        for (v, label) in [
-            (ymax, format!("{ymax:.3}")),
-            (0.0, "0".into()),
-            (-ymax, format!("{:.3}", -ymax)),
-        ] {
-            let _ = write!(
-                svg,
-                r#"<text x="{:.1}" y="{:.1}" font-size="11" text-anchor="end">{label}</text>"#,
-                M - 4.0,
-                py(v) + 4.0
-            );
-        }
-        for (u, label) in [(umin, format!("{umin:.2}")), (umax, format!("{umax:.2}"))] {
-            let _ = write!(
-                svg,
-                r#"<text x="{:.1}" y="{:.1}" font-size="11" text-anchor="middle">{label}</text>"#,
-                px(u),
-                y0 + PANEL_H - 0.3 * M
-            );
-        }
-        // band: +-2 sigma along u_s (points sorted by u_s)
-        let mut by_u = idx.clone();
-        by_u.sort_by(|&a, &b| plot.points[a].u_s_mm.total_cmp(&plot.points[b].u_s_mm));
-        let upper: Vec<String> = by_u
-            .iter()
-            .map(|&i| {
-                format!(
-                    "{:.1},{:.1}",
-                    px(plot.points[i].u_s_mm),
-                    py(2.0 * plot.sigma_mm[i])
-                )
-            })
-            .collect();
-        let lower: Vec<String> = by_u
-            .iter()
-            .rev()
-            .map(|&i| {
-                format!(
-                    "{:.1},{:.1}",
-                    px(plot.points[i].u_s_mm),
-                    py(-2.0 * plot.sigma_mm[i])
-                )
-            })
-            .collect();
-        let _ = write!(
-            svg,
-            r##"<polygon points="{} {}" fill="#f4d58d" fill-opacity="0.5" stroke="none"/>"##,
-            upper.join(" "),
-            lower.join(" ")
-        );
-        let _ = write!(
-            svg,
-            r##"<line x1="{M}" y1="{:.1}" x2="{:.1}" y2="{:.1}" stroke="#888"/>"##,
-            py(0.0),
-            W - 0.5 * M,
-            py(0.0)
-        );
-        for &i in &idx {
-            let _ = write!(
-                svg,
-                r##"<circle cx="{:.1}" cy="{:.1}" r="1.6" fill="#999"/>"##,
-                px(plot.points[i].u_s_mm),
-                py(plot.before_mm[i])
-            );
-        }
-        if let Some(after) = &plot.after_mm {
-            for &i in &idx {
-                let _ = write!(
-                    svg,
-                    r##"<circle cx="{:.1}" cy="{:.1}" r="1.6" fill="#1f5fbf"/>"##,
-                    px(plot.points[i].u_s_mm),
-                    py(after[i])
-                );
-            }
+            k += 1;
         }
     }
     svg.push_str("</svg>\n");
     svg
+}
+
+fn panel(svg: &mut String, y0: f64, plot: &PlotData, ser: &Series<'_>, p: f64, idx: &[usize]) {
+    let u = |i: usize| plot.points[i].u_s_mm;
+    let umin = idx.iter().map(|&i| u(i)).fold(f64::INFINITY, f64::min);
+    let umax = idx.iter().map(|&i| u(i)).fold(f64::NEG_INFINITY, f64::max);
+    let mut ymax = idx
+        .iter()
+        .map(|&i| {
+            let after = ser.after.map_or(0.0, |a| a[i].abs());
+            ser.before[i].abs().max(after).max(2.0 * ser.sigma[i]) * ser.scale
+        })
+        .fold(0.0, f64::max);
+    ymax = (ymax * 1.1).max(1e-4);
+    let px = |u: f64| M + (u - umin) / (umax - umin).max(1e-9) * (W - 1.5 * M);
+    // values in display units
+    let py = |r: f64| y0 + PANEL_H / 2.0 - r / ymax * (PANEL_H / 2.0 - 0.6 * M);
+    let sc = ser.scale;
+    let _ = write!(
+        svg,
+        r##"<rect x="{M}" y="{:.1}" width="{:.1}" height="{:.1}" fill="none" stroke="#444"/>"##,
+        y0 + 0.6 * M,
+        W - 1.5 * M,
+        PANEL_H - 1.2 * M
+    );
+    let _ = write!(
+        svg,
+        r#"<text x="{:.1}" y="{:.1}" font-size="14" text-anchor="middle">residual {} ({}) vs u_s (mm) at {p} kPa; grey: baseline, blue: {}; band: +-2 sigma</text>"#,
+        W / 2.0,
+        y0 + 0.4 * M,
+        ser.name,
+        ser.unit,
+        if ser.after.is_some() {
+            plot.after_label.as_str()
+        } else {
+            "(no effect added)"
+        }
+    );
+    for (v, label) in [
+        (ymax, format!("{ymax:.3}")),
+        (0.0, "0".into()),
+        (-ymax, format!("{:.3}", -ymax)),
+    ] {
+        let _ = write!(
+            svg,
+            r#"<text x="{:.1}" y="{:.1}" font-size="11" text-anchor="end">{label}</text>"#,
+            M - 4.0,
+            py(v) + 4.0
+        );
+    }
+    for (x, label) in [(umin, format!("{umin:.2}")), (umax, format!("{umax:.2}"))] {
+        let _ = write!(
+            svg,
+            r#"<text x="{:.1}" y="{:.1}" font-size="11" text-anchor="middle">{label}</text>"#,
+            px(x),
+            y0 + PANEL_H - 0.3 * M
+        );
+    }
+    // band: +-2 sigma along u_s (points sorted by u_s)
+    let mut by_u = idx.to_vec();
+    by_u.sort_by(|&a, &b| u(a).total_cmp(&u(b)));
+    let upper: Vec<String> = by_u
+        .iter()
+        .map(|&i| format!("{:.1},{:.1}", px(u(i)), py(2.0 * ser.sigma[i] * sc)))
+        .collect();
+    let lower: Vec<String> = by_u
+        .iter()
+        .rev()
+        .map(|&i| format!("{:.1},{:.1}", px(u(i)), py(-2.0 * ser.sigma[i] * sc)))
+        .collect();
+    let _ = write!(
+        svg,
+        r##"<polygon points="{} {}" fill="#f4d58d" fill-opacity="0.5" stroke="none"/>"##,
+        upper.join(" "),
+        lower.join(" ")
+    );
+    let _ = write!(
+        svg,
+        r##"<line x1="{M}" y1="{:.1}" x2="{:.1}" y2="{:.1}" stroke="#888"/>"##,
+        py(0.0),
+        W - 0.5 * M,
+        py(0.0)
+    );
+    for &i in idx {
+        let _ = write!(
+            svg,
+            r##"<circle cx="{:.1}" cy="{:.1}" r="1.6" fill="#999"/>"##,
+            px(u(i)),
+            py(ser.before[i] * sc)
+        );
+    }
+    if let Some(after) = ser.after {
+        for &i in idx {
+            let _ = write!(
+                svg,
+                r##"<circle cx="{:.1}" cy="{:.1}" r="1.6" fill="#1f5fbf"/>"##,
+                px(u(i)),
+                py(after[i] * sc)
+            );
+        }
+    }
 }
 
 /// Writes report.txt, diagnosis.json and residuals.svg into `dir`.
