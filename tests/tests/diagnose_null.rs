@@ -8,7 +8,8 @@
 //! noise model's table-error term followed the load steps; it was 28 of 100 with a smooth
 //! table-error term: README, Diagnosis).
 //! `NULL_SEEDS=N` runs the long check on fewer seeds (it then reports and fails, since the
-//! criterion needs >= 100); `NULL_MODULUS_KPA=E` at another true modulus (default 170).
+//! criterion needs >= 100); `NULL_MODULUS_KPA=E` at another true modulus (default 170);
+//! `NULL_WITHOUT_LOADS=1` drops the loads (the selection then reads the radius alone).
 
 use host::diagnosis::simulate::{SimSpec, simulate_with, truth_mechanics, truth_scenario};
 use host::diagnosis::tables::{EffectAxis, read_effect_table, shipped_tables_dir, sub_table};
@@ -38,7 +39,12 @@ fn false_positives(seeds: u64, modulus_kpa: f64) -> (usize, Vec<String>) {
             seed: 1000 + seed,
             ..spec0.clone()
         };
-        let points = simulate_with(&spec, &scenario, &mech);
+        let mut points = simulate_with(&spec, &scenario, &mech);
+        if std::env::var_os("NULL_WITHOUT_LOADS").is_some() {
+            for p in points.iter_mut() {
+                p.load_n = None;
+            }
+        }
         let options = DiagnoseOptions {
             bootstrap: 200,
             confidence_reruns: 0,
