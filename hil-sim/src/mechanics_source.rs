@@ -72,6 +72,21 @@ pub fn build_mechanics(
 /// The fem-core solves a `solve` mechanics source asks for (empty for other sources), in
 /// modulus-major order. They can be saved as JSON and used as a `curves` source.
 pub fn solve_curves(scenario: &Scenario) -> Result<Vec<Curve>, MechanicsSourceError> {
+    solve_params(scenario)
+        .into_iter()
+        .map(|params| {
+            fem_core::solve_curve(&params).map_err(|source| MechanicsSourceError::Solve {
+                modulus_kpa: params.sample_modulus_kpa,
+                pressure_kpa: params.pressure_kpa,
+                source,
+            })
+        })
+        .collect()
+}
+
+/// The curve parameters of a `solve` mechanics source (empty for other sources), in
+/// modulus-major order: the sample's parameters at each modulus factor and pressure.
+pub fn solve_params(scenario: &Scenario) -> Vec<CurveParams> {
     let MechanicsSource::Solve {
         pressures_kpa,
         modulus_factors,
@@ -80,29 +95,22 @@ pub fn solve_curves(scenario: &Scenario) -> Result<Vec<Curve>, MechanicsSourceEr
         max_depth_mm,
     } = &scenario.mechanics
     else {
-        return Ok(Vec::new());
+        return Vec::new();
     };
-    let mut curves = Vec::new();
+    let mut out = Vec::new();
     for &factor in modulus_factors {
         for &p in pressures_kpa {
-            let params = CurveParams {
+            out.push(CurveParams {
                 sample_modulus_kpa: scenario.sample.modulus_kpa * factor,
                 pressure_kpa: p,
                 max_depth_mm: *max_depth_mm,
                 steps: *steps,
                 mesh_level: *mesh_level,
                 ..sample_params(&scenario.sample)
-            };
-            let curve =
-                fem_core::solve_curve(&params).map_err(|source| MechanicsSourceError::Solve {
-                    modulus_kpa: params.sample_modulus_kpa,
-                    pressure_kpa: p,
-                    source,
-                })?;
-            curves.push(curve);
+            });
         }
     }
-    Ok(curves)
+    out
 }
 
 /// fem-core parameters of the sample (modulus and pressure are set by the caller).

@@ -7,18 +7,13 @@
 use criterion::{Criterion, criterion_group, criterion_main};
 use host::diagnosis::candidates::EffectKind;
 use host::diagnosis::simulate::{Hidden, SimSpec, simulate};
-use host::diagnosis::tables::{EffectAxis, read_effect_table, shipped_tables_dir, sub_table};
+use host::diagnosis::tables::shipped_tables;
 use host::diagnosis::{DiagnoseOptions, diagnose};
 use std::hint::black_box;
 use std::time::Duration;
 
 fn bench(c: &mut Criterion) {
-    let effects: Vec<_> = EffectAxis::ALL
-        .iter()
-        .map(|a| read_effect_table(&shipped_tables_dir().join(a.file_name())).expect("table"))
-        .collect();
-    let t = &effects[0];
-    let base = sub_table(&t.lut, &t.axis.select(t.axis.base_value())).expect("base slice");
+    let (base, effects) = shipped_tables().expect("shipped tables");
     let points = simulate(&SimSpec {
         hidden: Some(Hidden {
             kind: EffectKind::FiniteThickness,

@@ -10,7 +10,7 @@ use host::diagnosis::candidates::{Candidate, EffectKind, predict};
 use host::diagnosis::data::Point;
 use host::diagnosis::model::{Channel, Model};
 use host::diagnosis::stats::Gauss;
-use host::diagnosis::tables::{EffectAxis, read_effect_table, shipped_tables_dir, sub_table};
+use host::diagnosis::tables::shipped_tables;
 
 fn tactile() -> Command {
     Command::new(env!("CARGO_BIN_EXE_tactile"))
@@ -35,12 +35,7 @@ fn write_curves(
     replicates: u32,
     seed: u64,
 ) {
-    let effects: Vec<_> = EffectAxis::ALL
-        .iter()
-        .map(|a| read_effect_table(&shipped_tables_dir().join(a.file_name())).expect("tables"))
-        .collect();
-    let t = &effects[0];
-    let base = sub_table(&t.lut, &t.axis.select(t.axis.base_value())).expect("base slice");
+    let (base, effects) = shipped_tables().expect("shipped tables");
     let model = Model::new(&base, &effects).expect("model");
     let cand = effect.map(|(kind, _)| Candidate {
         kind,

@@ -14,7 +14,7 @@ use host::diagnosis::load_channel::LoadChannel;
 use host::diagnosis::model::{Channel, Model};
 use host::diagnosis::noise_model::NoiseModel;
 use host::diagnosis::stats::Gauss;
-use host::diagnosis::tables::{EffectAxis, read_effect_table, shipped_tables_dir, sub_table};
+use host::diagnosis::tables::shipped_tables;
 
 const TRUE_MODULUS_KPA: f64 = 170.0;
 const TRUE_MU: f64 = 0.3;
@@ -57,12 +57,7 @@ fn synthetic(model: &Model<'_>, truth: Option<&Candidate>, theta: f64, seed: u64
 
 #[test]
 fn loads_tell_friction_from_a_camera_scale_that_fits_the_radius_alike() {
-    let effects: Vec<_> = EffectAxis::ALL
-        .iter()
-        .map(|a| read_effect_table(&shipped_tables_dir().join(a.file_name())).expect("tables"))
-        .collect();
-    let t = &effects[0];
-    let base = sub_table(&t.lut, &t.axis.select(t.axis.base_value())).expect("base slice");
+    let (base, effects) = shipped_tables().expect("shipped tables");
     let model = Model::new(&base, &effects).expect("model");
     let friction = candidate(EffectKind::Friction);
     let scale = candidate(EffectKind::RadiusScale);
@@ -172,12 +167,7 @@ fn loads_tell_friction_from_a_camera_scale_that_fits_the_radius_alike() {
 
 #[test]
 fn a_camera_scale_leaves_the_loads_alone() {
-    let effects: Vec<_> = EffectAxis::ALL
-        .iter()
-        .map(|a| read_effect_table(&shipped_tables_dir().join(a.file_name())).expect("tables"))
-        .collect();
-    let t = &effects[0];
-    let base = sub_table(&t.lut, &t.axis.select(t.axis.base_value())).expect("base slice");
+    let (base, effects) = shipped_tables().expect("shipped tables");
     let model = Model::new(&base, &effects).expect("model");
     let scale = candidate(EffectKind::RadiusScale);
     let pts = synthetic(&model, Some(&scale), 0.03, 8);

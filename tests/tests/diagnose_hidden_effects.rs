@@ -11,24 +11,14 @@
 
 use host::diagnosis::candidates::EffectKind;
 use host::diagnosis::simulate::{Hidden, SimSpec, simulate, sizes, truth_modulus_kpa};
-use host::diagnosis::tables::{EffectAxis, read_effect_table, shipped_tables_dir, sub_table};
+use host::diagnosis::tables::shipped_tables;
 use host::diagnosis::{DiagnoseOptions, diagnose};
 
 fn tables() -> (
     fem_core::lut::Lut,
     Vec<host::diagnosis::tables::EffectTable>,
 ) {
-    let effects: Vec<_> = EffectAxis::ALL
-        .iter()
-        .map(|a| {
-            read_effect_table(&shipped_tables_dir().join(a.file_name()))
-                .expect("diagnosis test setup")
-        })
-        .collect();
-    let t = &effects[0];
-    let base =
-        sub_table(&t.lut, &t.axis.select(t.axis.base_value())).expect("diagnosis test setup");
-    (base, effects)
+    shipped_tables().expect("diagnosis test setup")
 }
 
 fn check(kind: EffectKind, seed: u64) {

@@ -166,43 +166,25 @@ impl std::fmt::Debug for Truth {
 /// The truth mechanics of a scenario (the expensive part: fem-core solves, each kept up to
 /// its last converged step, [`fem_core::solve_curve_partial`]).
 pub fn truth_mechanics(scenario: &Scenario) -> Result<Truth, String> {
-    let MechanicsSource::Solve {
-        pressures_kpa,
-        modulus_factors,
-        mesh_level,
-        steps,
-        max_depth_mm,
-    } = &scenario.mechanics
-    else {
+    if !matches!(scenario.mechanics, MechanicsSource::Solve { .. }) {
         let mechanics =
             hil_sim::mechanics_source::build_mechanics(scenario).map_err(|e| e.to_string())?;
         return Ok(Truth {
             mechanics,
             reached_travel_mm: f64::INFINITY,
         });
-    };
+    }
     let mut curves = Vec::new();
     let mut reached = f64::INFINITY;
-    for &factor in modulus_factors {
-        for &p in pressures_kpa {
-            let params = fem_core::CurveParams {
-                sample_modulus_kpa: scenario.sample.modulus_kpa * factor,
-                pressure_kpa: p,
-                max_depth_mm: *max_depth_mm,
-                steps: *steps,
-                mesh_level: *mesh_level,
-                ..hil_sim::mechanics_source::sample_params(&scenario.sample)
-            };
-            let (curve, _stop) = fem_core::solve_curve_partial(&params).map_err(|e| {
-                format!(
-                    "fem-core solve at E2 = {:.4} kPa, p_air = {p} kPa failed: {e}",
-                    params.sample_modulus_kpa
-                )
-            })?;
-            let last = curve.points.last().map_or(0.0, |q| q.h_mm);
-            reached = reached.min(last);
-            curves.push(curve);
-        }
+    for params in hil_sim::mechanics_source::solve_params(scenario) {
+        let (curve, _stop) = fem_core::solve_curve_partial(&params).map_err(|e| {
+            format!(
+                "fem-core solve at E2 = {:.4} kPa, p_air = {} kPa failed: {e}",
+                params.sample_modulus_kpa, params.pressure_kpa
+            )
+        })?;
+        reached = reached.min(curve.points.last().map_or(0.0, |q| q.h_mm));
+        curves.push(curve);
     }
     let mechanics = hil_sim::mechanics::CurveMechanics::new(&curves).map_err(|e| e.to_string())?;
     if scenario.effects.needs_modulus_axis() && !mechanics.has_modulus_axis() {

@@ -226,6 +226,26 @@ pub fn read_effect_table(path: &Path) -> Result<EffectTable, TableError> {
     })
 }
 
+/// The shipped effect tables (`fem-core/data/effects-*.lut`) and the baseline: the base
+/// slice of the first (the thickness table), which has the effect tables' mesh and steps.
+pub fn shipped_tables() -> Result<(Lut, Vec<EffectTable>), TableError> {
+    let effects = EffectAxis::ALL
+        .iter()
+        .map(|a| read_effect_table(&shipped_tables_dir().join(a.file_name())))
+        .collect::<Result<Vec<_>, _>>()?;
+    let t = effects.first().ok_or(TableError::Read {
+        path: shipped_tables_dir().display().to_string(),
+        reason: "no effect tables".into(),
+    })?;
+    let base = sub_table(&t.lut, &t.axis.select(t.axis.base_value())).map_err(|reason| {
+        TableError::Slice {
+            path: t.path.clone(),
+            reason,
+        }
+    })?;
+    Ok((base, effects))
+}
+
 /// A complete one-slice table cut out of `lut` at the effect selection `sel` (every other
 /// axis single-valued), with curves re-indexed; usable by the host's fit.
 pub fn sub_table(lut: &Lut, sel: &EffectSelection) -> Result<Lut, String> {
