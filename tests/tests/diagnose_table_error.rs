@@ -145,19 +145,22 @@ fn loo_calibration() {
                     z2.push((diff / (lut_error_scale(e) * loo)).powi(2));
                 }
             }
+            let mut lag_curve = 0.0;
             for w in d.windows(2) {
                 lag += w[0] * w[1];
+                lag_curve += w[0] * w[1];
             }
             lag0 += ed;
             sd += ed;
             sl += el;
             println!(
-                "E2 {e:7.2} p {p:4.1}: truth-table RMS {:.4} mm, LOO RMS {:.4} mm, ratio {:.2} (scale {:.2}; {} steps)",
+                "E2 {e:7.2} p {p:4.1}: truth-table RMS {:.4} mm, LOO RMS {:.4} mm, ratio {:.2} (scale {:.2}; {} steps; lag-1 correlation {:+.2})",
                 (ed / d.len().max(1) as f64).sqrt(),
                 (el / d.len().max(1) as f64).sqrt(),
                 (ed / el.max(1e-30)).sqrt(),
                 lut_error_scale(e),
-                d.len()
+                d.len(),
+                lag_curve / ed.max(1e-30)
             );
         }
     }
