@@ -17,6 +17,7 @@ pub mod candidates;
 #[cfg(feature = "sim")]
 pub mod confusion;
 pub mod data;
+pub mod errors_in_variables;
 pub mod fitting;
 pub mod linalg;
 pub mod load_channel;
@@ -302,7 +303,16 @@ pub fn diagnose(
     let sub_r: Vec<f64> = subset.iter().map(|&i| r0[i]).collect();
     // estimate on the used points only, then expand to all indices
     let noise_sub = NoiseModel::estimate(&model, &sub_points, &sub_r, e_host);
-    let points_used: Vec<Point> = sub_points;
+    let mut points_used: Vec<Point> = sub_points;
+    // the bias of reading a curved model at a noisy u_s (errors_in_variables.rs)
+    let (eiv_a, eiv_load) = errors_in_variables::correct(&model, e_host, &mut points_used, |p| {
+        noise_sub.u_variance_mm2(p)
+    });
+    notes.push(format!(
+        "errors in u_s: the bias of reading the curved model at a noisy u_s (f'' sigma_u^2 / 2, sigma_u from the noise model) was removed from the data: at most {:.4} mm in a, {:.2} mN in the load",
+        eiv_a,
+        1e3 * eiv_load
+    ));
     let all: Vec<usize> = (0..points_used.len()).collect();
     let noise = noise_sub;
     if noise.any_assumed() {

@@ -322,6 +322,14 @@ impl NoiseModel {
         }
     }
 
+    /// Variance of the u_s error at one point of pressure `p` (mm^2): white, per-test offset
+    /// and smooth parts in u_s (0 when assumed or unknown).
+    pub fn u_variance_mm2(&self, p: f64) -> f64 {
+        self.at(p).map_or(0.0, |n| {
+            n.white_u_mm.powi(2) + n.test_offset_u_mm.powi(2) + n.smooth_u_mm.powi(2)
+        })
+    }
+
     pub fn any_assumed(&self) -> bool {
         self.pressures.iter().any(|p| p.assumed)
     }
