@@ -36,7 +36,13 @@ pub fn bias(
     if u - step < range.0 || u + step > range.1 {
         return 0.0;
     }
-    let f = |x: f64| channel.of(&model.base.sample(e, p, x));
+    gauss_hermite_bias(|x| channel.of(&model.base.sample(e, p, x)), u, var_u_mm2)
+}
+
+/// E[f(u - d)] - f(u) for d ~ N(0, var) by three-point Gauss–Hermite quadrature (nodes 0,
+/// +-sqrt(3 var), weights 2/3, 1/6, 1/6).
+pub fn gauss_hermite_bias(f: impl Fn(f64) -> f64, u: f64, var: f64) -> f64 {
+    let step = (3.0 * var).sqrt();
     (f(u + step) + f(u - step) - 2.0 * f(u)) / 6.0
 }
 
@@ -78,4 +84,32 @@ pub fn correct(
         }
     }
     (worst_a, worst_load)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quadrature_matches_closed_form_expectations() {
+        // E[(u - d)^3] - u^3 = 3 u var for Gaussian d (odd moments vanish): exact for cubics
+        let (u, var) = (0.4, 2.5e-5);
+        let b = gauss_hermite_bias(|x| x * x * x, u, var);
+        assert!((b - 3.0 * u * var).abs() < 1e-15, "{b}");
+        // E[exp(u - d)] - exp(u) = exp(u) (exp(var/2) - 1); the 3-point rule's error is
+        // O(var^2) relative: at var = 0.01 the difference is ~1e-5 of exp(u)
+        let var = 0.01;
+        let b = gauss_hermite_bias(f64::exp, 0.0, var);
+        let exact = (0.5 * var).exp() - 1.0;
+        assert!((b - exact).abs() < 2e-5, "{b} vs {exact}");
+        // a square root (the shape of a(u_s) near first contact): concave, so negative,
+        // and f'' var / 2 = -var / (8 u^1.5) to leading order
+        let (u, var) = (0.05, 1e-5);
+        let b = gauss_hermite_bias(f64::sqrt, u, var);
+        let leading = -var / (8.0 * u.powf(1.5));
+        assert!(
+            b < 0.0 && (b - leading).abs() < 0.05 * leading.abs(),
+            "{b} vs {leading}"
+        );
+    }
 }
