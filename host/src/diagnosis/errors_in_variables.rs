@@ -1,8 +1,8 @@
 //! Errors in the variable: u_s is measured with noise (the proximity sensor's white noise, a
 //! tare error per indentation, a slow drift), and a curved model read at a noisy abscissa is
 //! biased. With u_meas = u + d, d ~ N(0, sigma_u^2) and the true u spread evenly, the
-//! expected measurement at u_meas is E[f(u_meas - d)] = f(u_meas) + f''(u_meas) sigma_u^2 / 2
-//! + O(sigma_u^4) (the small-error expansion of Carroll, Ruppert, Stefanski & Crainiceanu,
+//! expected measurement at u_meas is E[f(u_meas - d)] = f(u_meas) + f''(u_meas) sigma_u^2 / 2,
+//! to O(sigma_u^4) (the small-error expansion of Carroll, Ruppert, Stefanski & Crainiceanu,
 //! *Measurement Error in Nonlinear Models*, 2nd ed. 2006, ch. 4). The bias is common to every
 //! replicate, so the noise model (built from replicate deviations) cannot see it, and where
 //! a(u_s) is steep and curved (soft samples, where the whole curve lies within u_s < 0.3 mm)
