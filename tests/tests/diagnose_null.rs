@@ -4,7 +4,7 @@
 //! took 40 s in debug, too long for the default suite); the full
 //! check (>= 100 seeds, <= 5 %) is
 //! `cargo test --release -p system-tests --test diagnose_null -- --ignored --nocapture`
-//! (measured 0 of 100 with the load channel in the selection, 2 of 100 before it, once the
+//! (measured 1 of 100 with the load channel and the errors-in-variables correction, 2 of 100 before, once the
 //! noise model's table-error term followed the load steps; it was 28 of 100 with a smooth
 //! table-error term: README, Diagnosis).
 //! `NULL_SEEDS=N` runs the long check on fewer seeds (it then reports and fails, since the
