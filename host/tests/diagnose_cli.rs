@@ -6,10 +6,9 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use host::diagnosis::candidates::{Candidate, EffectKind, predict};
-use host::diagnosis::data::Point;
-use host::diagnosis::model::{Channel, Model};
-use host::diagnosis::stats::Gauss;
+use host::diagnosis::candidates::{Candidate, EffectKind};
+use host::diagnosis::model::Model;
+use host::diagnosis::synthetic::{SyntheticSpec, generate};
 use host::diagnosis::tables::shipped_tables;
 
 fn tactile() -> Command {
@@ -41,30 +40,15 @@ fn write_curves(
         kind,
         tau_h_mm: None,
     });
-    let theta = effect.map_or(0.0, |e| e.1);
-    let mut g = Gauss::new(seed);
-    let mut points = Vec::new();
-    for p in [6.0, 15.0] {
-        for test in 0..replicates {
-            let (off_a, off_load) = (0.002 * g.normal(), 1e-3 * g.normal());
-            for k in 0..45 {
-                let mut pt = Point {
-                    u_s_mm: 0.1 + 1.1 * f64::from(k) / 44.0,
-                    a_mm: 0.0,
-                    p_air_kpa: p,
-                    test,
-                    load_n: None,
-                    t_s: None,
-                    h_mm: None,
-                };
-                let a = predict(&model, cand.as_ref(), 170.0, theta, &pt, Channel::Radius);
-                let load = predict(&model, cand.as_ref(), 170.0, theta, &pt, Channel::Load);
-                pt.a_mm = a + extra(pt.u_s_mm) + off_a + 0.004 * g.normal();
-                pt.load_n = Some(load + off_load + 1e-3 * g.normal());
-                points.push(pt);
-            }
-        }
-    }
+    let truth = cand.as_ref().zip(effect.map(|e| e.1));
+    let spec = SyntheticSpec {
+        replicates,
+        points_per_test: 45,
+        u_s_range_mm: (0.1, 1.2),
+        seed,
+        ..SyntheticSpec::default()
+    };
+    let points = generate(&model, truth, extra, &spec);
     let text = host::diagnosis::simulate::to_curve_csv(&points, "diagnose_cli test").expect("csv");
     std::fs::write(path, text).expect("write csv");
 }

@@ -8,12 +8,12 @@
 //! per-test offset of 2 um on a and 1 mN on the load.
 
 use host::diagnosis::candidates::{Candidate, EffectKind, predict};
-use host::diagnosis::data::{Point, sort_points};
+use host::diagnosis::data::Point;
 use host::diagnosis::fitting::fit;
 use host::diagnosis::load_channel::LoadChannel;
 use host::diagnosis::model::{Channel, Model};
 use host::diagnosis::noise_model::NoiseModel;
-use host::diagnosis::stats::Gauss;
+use host::diagnosis::synthetic::{SyntheticSpec, generate};
 use host::diagnosis::tables::shipped_tables;
 
 const TRUE_MODULUS_KPA: f64 = 170.0;
@@ -28,31 +28,12 @@ fn candidate(kind: EffectKind) -> Candidate {
 
 /// Points along u_s 0.15..1.15 mm, 40 per replicate, the truth being `truth` at `theta`.
 fn synthetic(model: &Model<'_>, truth: Option<&Candidate>, theta: f64, seed: u64) -> Vec<Point> {
-    let mut g = Gauss::new(seed);
-    let mut out = Vec::new();
-    for p in [6.0, 15.0] {
-        for test in 0..5u32 {
-            let (off_a, off_load) = (0.002 * g.normal(), 1e-3 * g.normal());
-            for k in 0..40 {
-                let mut pt = Point {
-                    u_s_mm: 0.15 + 1.0 * k as f64 / 39.0,
-                    a_mm: 0.0,
-                    p_air_kpa: p,
-                    test,
-                    load_n: None,
-                    t_s: None,
-                    h_mm: None,
-                };
-                let a = predict(model, truth, TRUE_MODULUS_KPA, theta, &pt, Channel::Radius);
-                let load = predict(model, truth, TRUE_MODULUS_KPA, theta, &pt, Channel::Load);
-                pt.a_mm = a + off_a + 0.004 * g.normal();
-                pt.load_n = Some(load + off_load + 1e-3 * g.normal());
-                out.push(pt);
-            }
-        }
-    }
-    sort_points(&mut out);
-    out
+    let spec = SyntheticSpec {
+        modulus_kpa: TRUE_MODULUS_KPA,
+        seed,
+        ..SyntheticSpec::default()
+    };
+    generate(model, truth.map(|c| (c, theta)), |_| 0.0, &spec)
 }
 
 #[test]
