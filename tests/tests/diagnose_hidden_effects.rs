@@ -89,7 +89,7 @@ fn camera_radius_offset_is_named_and_the_gap_shrinks() {
 }
 
 #[test]
-#[ignore = "90 s in release (friction solves); run with --release -- --ignored --nocapture"]
+#[ignore = "86-98 s in release (friction solves); run with --release -- --ignored --nocapture"]
 fn every_effect_at_a_clear_size_is_named_and_the_gap_shrinks() {
     // every effect is checked (a failure is reported, not the end of the run)
     let failed: Vec<&str> = EffectKind::ALL

@@ -39,13 +39,6 @@ impl Channel {
             Self::Load => p.load_n.unwrap_or(f64::NAN),
         }
     }
-
-    pub fn unit(self) -> &'static str {
-        match self {
-            Self::Radius => "mm",
-            Self::Load => "N",
-        }
-    }
 }
 
 /// One (E2, p_air) slice, clamped into its table.

@@ -132,12 +132,8 @@ fn bins_of(us: &[f64], k: usize) -> Vec<usize> {
 
 /// Leave-one-out interpolation error of the baseline table at u_s: PCHIP across ln E2 at the
 /// modulus node nearest to `e` from its neighbours (two on each side where they reach u_s)
-/// minus the node's own value, in absolute value (mm; 0 where it cannot be formed).
-pub fn lut_loo_error_mm(model: &Model<'_>, e: f64, p: f64, u: f64) -> f64 {
-    lut_loo_error(model, Channel::Radius, e, p, u)
-}
-
-/// [`lut_loo_error_mm`] of either channel (mm for the radius, N for the load).
+/// minus the node's own value, in absolute value (0 where it cannot be formed); mm for the
+/// radius, N for the load.
 pub fn lut_loo_error(model: &Model<'_>, channel: Channel, e: f64, p: f64, u: f64) -> f64 {
     let nodes = model.base.moduli_kpa();
     let n = nodes.len();
@@ -181,7 +177,7 @@ pub fn lut_loo_error(model: &Model<'_>, channel: Channel, e: f64, p: f64, u: f64
 }
 
 /// Load-step knots of a curve at (E2, p_air) ([`Model::step_knots_mm`]) and, at each, the
-/// leave-one-out error of the table ([`lut_loo_error_mm`]) as an RMS over the knot and its
+/// leave-one-out error of the table ([`lut_loo_error`]) as an RMS over the knot and its
 /// two neighbours on each side: the pointwise |LOO| passes through zero where the wiggle
 /// does, not where the error is small.
 pub fn table_error_knots(model: &Model<'_>, e: f64, p: f64) -> (Vec<f64>, Vec<f64>) {
