@@ -19,6 +19,7 @@ pub mod model;
 pub mod pressure_load;
 pub mod problem;
 pub mod shape;
+pub mod shipped;
 
 pub use curve::{ContactPressureSample, Curve, CurveParams, CurvePoint, MaterialLaw};
 pub use error::FemError;

@@ -124,6 +124,10 @@ impl SolverSettings {
     }
 }
 
+/// Thickest sample the mesh is built for (ten shell diameters; a thicker one indents as
+/// a half-space within the depths the sensor reaches).
+pub const MAX_SAMPLE_THICKNESS_MM: f64 = 50.0;
+
 fn check(field: &'static str, value: f64, ok: bool, reason: &'static str) -> Result<(), FemError> {
     if ok && value.is_finite() {
         Ok(())
@@ -159,8 +163,8 @@ pub fn validate(p: &CurveParams) -> Result<(), FemError> {
     check(
         "sample_thickness_mm",
         p.sample_thickness_mm,
-        p.sample_thickness_mm > 0.2,
-        "must be > 0.2 mm",
+        p.sample_thickness_mm > 0.2 && p.sample_thickness_mm <= MAX_SAMPLE_THICKNESS_MM,
+        "must be in (0.2, 50] mm (the sample mesh is graded for that range; beyond it the sample is a half-space for this indenter)",
     )?;
     check(
         "shell_modulus_kpa",

@@ -93,13 +93,15 @@ fn default_max_depth() -> f64 {
 impl Default for MechanicsSource {
     fn default() -> Self {
         Self::Lut {
-            path: PathBuf::from(DEFAULT_LUT_PATH),
+            path: fem_core::shipped::default_lut_path(),
         }
     }
 }
 
-/// The LUT shipped in the repository, relative to the workspace root.
-pub const DEFAULT_LUT_PATH: &str = "fem-core/data/default.lut";
+
+/// Largest simulated frame side (a 4096x4096 grey frame is 16 MB; the sensor's camera
+/// is far smaller).
+pub const MAX_CAMERA_SIDE_PX: usize = 4096;
 
 /// The linear stage.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -362,12 +364,16 @@ impl Scenario {
                 format!("must be in 30..=120, got {}", self.camera.fps),
             );
         }
-        if self.camera.width < 16 || self.camera.height < 16 || !self.camera.width.is_multiple_of(2)
+        if self.camera.width < 16
+            || self.camera.height < 16
+            || !self.camera.width.is_multiple_of(2)
+            || self.camera.width > MAX_CAMERA_SIDE_PX
+            || self.camera.height > MAX_CAMERA_SIDE_PX
         {
             return bad(
                 "camera.width",
                 format!(
-                    "frame must be at least 16x16 with an even width, got {}x{}",
+                    "frame must be 16x16 to {MAX_CAMERA_SIDE_PX}x{MAX_CAMERA_SIDE_PX} with an even width, got {}x{}",
                     self.camera.width, self.camera.height
                 ),
             );

@@ -115,13 +115,28 @@ fn column_named(name: &str) -> Option<Column> {
     COLUMNS.iter().find(|(_, n)| *n == name).map(|(c, _)| *c)
 }
 
+/// Largest curve file read (a 6-repeat record at 60 frames/s is well under 1 MB).
+pub const MAX_CURVE_BYTES: u64 = 64 << 20;
+/// Most data rows in one curve file.
+pub const MAX_CURVE_ROWS: usize = 1_000_000;
+
 /// Read a curve file.
 pub fn read_curve_csv(path: &Path) -> Result<CurveCsv, CurveCsvError> {
     let file = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|source| CurveCsvError::Io {
+    let io = |source| CurveCsvError::Io {
         file: file.clone(),
         source,
-    })?;
+    };
+    let size = std::fs::metadata(path).map_err(io)?.len();
+    if size > MAX_CURVE_BYTES {
+        return Err(CurveCsvError::Invalid {
+            file: file.clone(),
+            reason: format!(
+                "{size} bytes; a curve file is at most {MAX_CURVE_BYTES} bytes (is this a curve CSV?)"
+            ),
+        });
+    }
+    let text = std::fs::read_to_string(path).map_err(io)?;
     parse_curve_csv(&text, &file)
 }
 
@@ -182,6 +197,12 @@ pub fn parse_curve_csv(text: &str, file: &str) -> Result<CurveCsv, CurveCsvError
             columns = Some(cols);
             continue;
         };
+        if out.rows.len() >= MAX_CURVE_ROWS {
+            return Err(err(
+                line_no,
+                format!("more than {MAX_CURVE_ROWS} data rows; split the curve"),
+            ));
+        }
         if cells.len() != cols.len() {
             return Err(err(
                 line_no,
@@ -213,7 +234,15 @@ pub fn parse_curve_csv(text: &str, file: &str) -> Result<CurveCsv, CurveCsvError
             };
             match c {
                 Column::USMm => row.u_s_mm = number(true)?.unwrap_or(f64::NAN),
-                Column::AMm => row.a_mm = number(true)?.unwrap_or(f64::NAN),
+                Column::AMm => {
+                    row.a_mm = number(true)?.unwrap_or(f64::NAN);
+                    if row.a_mm < 0.0 {
+                        return Err(err(
+                            line_no,
+                            format!("a_mm = {cell} is negative (a contact radius is >= 0)"),
+                        ));
+                    }
+                }
                 Column::LoadN => row.load_n = number(false)?,
                 Column::PAirKpa => row.p_air_kpa = number(false)?,
                 Column::TS => row.t_s = number(false)?,

@@ -375,3 +375,68 @@ fn unplug_and_replug_mid_experiment() {
     b.daemon.shutdown();
     let _ = std::fs::remove_dir_all(&b.dir);
 }
+
+/// Sets the pressure, retrying while the stopped job winds down (409) or the link reopens;
+/// returns how long it took from `since`. Fails the test after `limit`.
+fn pressure_ok_within(client: &Client, kpa: f64, since: Instant, limit: Duration) -> Duration {
+    loop {
+        match client.set_pressure(kpa) {
+            Ok(_) => return since.elapsed(),
+            Err(e) => assert!(
+                since.elapsed() < limit,
+                "no pressure request succeeded within {limit:?} of the stop; last: {e}"
+            ),
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// `cycles` times: start an experiment, stop it mid-stroke, then a pressure request must
+/// succeed within 2 s of the stop; then a stop while idle, and again a pressure request
+/// within 2 s. Each cycle's experiment must have started (reached its indentation), which
+/// shows the previous stop left the daemon usable; the last experiment runs to completion.
+fn stop_and_recover(name: &str, cycles: usize) {
+    let b = calibrated(name);
+    let limit = Duration::from_secs(2);
+    let mut worst = Duration::ZERO;
+    for cycle in 0..cycles {
+        let job = b.client.submit(&short_run(2)).unwrap();
+        wait_indenting(&b.client, job.id);
+        std::thread::sleep(Duration::from_millis(200));
+        let stopped_at = Instant::now();
+        let report = b.client.stop().unwrap();
+        assert!(report.sent, "cycle {cycle}: {report:?}");
+        let t = pressure_ok_within(&b.client, 6.0, stopped_at, limit);
+        worst = worst.max(t);
+        let done = wait_job(&b.client, job.id, Duration::from_secs(10));
+        assert_eq!(done.state, JobState::Partial, "cycle {cycle}: {done:?}");
+        // A stop while idle (pressure regulated, nothing running), then a command again.
+        let stopped_at = Instant::now();
+        let report = b.client.stop().unwrap();
+        assert!(report.sent && report.cancelled_job.is_none(), "{report:?}");
+        let t = pressure_ok_within(&b.client, 0.0, stopped_at, limit);
+        worst = worst.max(t);
+    }
+    println!("{cycles} stop cycles: slowest recovery to an accepted pressure request {worst:?}");
+    let last = b.client.submit(&short_run(1)).unwrap();
+    let last = wait_job(&b.client, last.id, Duration::from_secs(60));
+    assert_eq!(last.state, JobState::Complete, "{last:?}");
+    let status = b.client.status().unwrap();
+    assert!(status.connected && status.gaps.is_empty(), "{status:?}");
+    b.daemon.shutdown();
+    let _ = std::fs::remove_dir_all(&b.dir);
+}
+
+/// The daemon recovers from an emergency stop mid-experiment and while idle (3 cycles in
+/// the default suite; the 20-cycle run is `stop_and_recover_20_times`).
+#[test]
+fn after_an_emergency_stop_commands_and_experiments_work_again() {
+    stop_and_recover("daemon-recover", 3);
+}
+
+/// Long run: `cargo test -p system-tests --release --test daemon_experiments -- --ignored`.
+#[test]
+#[ignore = "long run (about 2 minutes): 20 stop-and-recover cycles"]
+fn stop_and_recover_20_times() {
+    stop_and_recover("daemon-recover-20", 20);
+}

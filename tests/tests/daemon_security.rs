@@ -213,6 +213,7 @@ fn non_loopback_needs_an_explicit_flag() {
         token_file: dir.join("token"),
         records_dir: dir.join("records"),
         lut_path: host::daemon::sim::shipped_lut(),
+        max_connections: host::daemon::listener::MAX_CONNECTIONS,
         device: host::daemon::DeviceConfig {
             idle_stream_hz: 100,
             link: host::link::LinkConfig::default(),

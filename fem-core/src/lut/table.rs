@@ -188,6 +188,47 @@ impl Lut {
             if c.failure.is_some() && n != 0 {
                 return Err(format!("failed curve {} holds data", c.index));
             }
+            if c.failure.is_none() {
+                for (name, v) in [
+                    ("rest_volume_mm3", c.rest_volume_mm3),
+                    ("inflated_volume_mm3", c.inflated_volume_mm3),
+                    ("inflation_apex_mm", c.inflation_apex_mm),
+                ] {
+                    if !v.is_finite() {
+                        return Err(format!("curve {}: {name} = {v} is not finite", c.index));
+                    }
+                }
+            }
+            let columns = [
+                ("h_mm", &c.h_mm),
+                ("u_s_mm", &c.u_s_mm),
+                ("a_mm", &c.a_mm),
+                ("load_n", &c.load_n),
+                ("volume_mm3", &c.volume_mm3),
+            ];
+            for (name, column) in columns {
+                if let Some(k) = column.iter().position(|v| !v.is_finite()) {
+                    return Err(format!(
+                        "curve {} step {k}: {name} = {} is not a finite number",
+                        c.index, column[k]
+                    ));
+                }
+            }
+            if let Some(k) = c.a_mm.iter().position(|&a| a < 0.0) {
+                return Err(format!(
+                    "curve {} step {k}: a_mm = {} is negative",
+                    c.index, c.a_mm[k]
+                ));
+            }
+            if let Some(k) = c.h_mm.windows(2).position(|w| w[1] < w[0]) {
+                return Err(format!(
+                    "curve {} step {}: h_mm decreases ({} after {})",
+                    c.index,
+                    k + 1,
+                    c.h_mm[k + 1],
+                    c.h_mm[k]
+                ));
+            }
         }
         Ok(())
     }

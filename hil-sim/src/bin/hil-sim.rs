@@ -22,7 +22,19 @@ struct Args {
     camera: bool,
     run: bool,
     save_curves: Option<PathBuf>,
+    help: bool,
 }
+
+const USAGE: &str = "usage: hil-sim [--scenario FILE] [--seed N] [--pacing auto|realtime|fast] [--no-camera] [--run] [--save-curves DIR]
+
+Serves the simulated bench on a pseudo-terminal (its path is printed) until killed.
+  --scenario FILE   scenario TOML (default: the built-in gelatin sample on the shipped table)
+  --seed N          random seed of the sensor noise and faults
+  --pacing MODE     auto (real time while a host is connected), realtime or fast
+  --no-camera       do not render frames
+  --run             simulate the scenario's duration without a host and print the timing
+  --save-curves DIR solve a `solve` scenario's curves once and write them as JSON
+  -h, --help        this text";
 
 fn parse_args() -> Result<Args, String> {
     let mut args = Args {
@@ -32,6 +44,7 @@ fn parse_args() -> Result<Args, String> {
         camera: true,
         run: false,
         save_curves: None,
+        help: false,
     };
     let mut it = std::env::args().skip(1);
     while let Some(arg) = it.next() {
@@ -63,9 +76,7 @@ fn parse_args() -> Result<Args, String> {
             "--save-curves" => {
                 args.save_curves = Some(it.next().ok_or("--save-curves needs a directory")?.into());
             }
-            "-h" | "--help" => {
-                return Err("usage: hil-sim [--scenario FILE] [--seed N] [--pacing auto|realtime|fast] [--no-camera] [--run] [--save-curves DIR]".into());
-            }
+            "-h" | "--help" => args.help = true,
             other => return Err(format!("unknown argument `{other}` (try --help)")),
         }
     }
@@ -80,6 +91,10 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
+    if args.help {
+        println!("{USAGE}");
+        return ExitCode::SUCCESS;
+    }
     let mut scenario = match &args.scenario {
         Some(path) => match Scenario::load(path) {
             Ok(s) => s,

@@ -106,8 +106,20 @@ pub enum CalibrationStoreError {
         #[source]
         source: serde_json::Error,
     },
-    #[error("no calibration record in {0}")]
+    #[error(
+        "calibration folder {path}: {source}; run `tactile calibrate` first, or name a record with --calibration FILE"
+    )]
+    Folder {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{path}: {bytes} bytes is not a calibration record (at most {MAX_RECORD_BYTES})")]
+    TooLarge { path: PathBuf, bytes: u64 },
+    #[error("no calibration record in {0}: run `tactile calibrate` first")]
     None(PathBuf),
+    #[error("no valid calibration record in {dir}: {}", rejected.join("; "))]
+    NoneValid { dir: PathBuf, rejected: Vec<String> },
 }
 
 /// Writes `record` as `<dir>/calibration-<unix seconds>.json`; returns the path.
@@ -130,9 +142,11 @@ pub fn save_record(
     Ok(path)
 }
 
-/// The newest record in `dir`.
+/// The newest valid record in `dir` (by its time-stamped name). A newer file that cannot
+/// be read or parsed is skipped with a warning naming it, so one truncated record does not
+/// hide the valid ones before it; if none is valid the error names every rejected file.
 pub fn load_latest(dir: &Path) -> Result<(PathBuf, CalibrationRecord), CalibrationStoreError> {
-    let entries = std::fs::read_dir(dir).map_err(|source| CalibrationStoreError::Io {
+    let entries = std::fs::read_dir(dir).map_err(|source| CalibrationStoreError::Folder {
         path: dir.to_path_buf(),
         source,
     })?;
@@ -145,16 +159,47 @@ pub fn load_latest(dir: &Path) -> Result<(PathBuf, CalibrationRecord), Calibrati
         })
         .collect();
     files.sort();
-    let path = files
-        .pop()
-        .ok_or_else(|| CalibrationStoreError::None(dir.to_path_buf()))?;
-    let text = std::fs::read_to_string(&path).map_err(|source| CalibrationStoreError::Io {
-        path: path.clone(),
+    let mut rejected = Vec::new();
+    while let Some(path) = files.pop() {
+        match load_record(&path) {
+            Ok(record) => {
+                for reason in &rejected {
+                    tracing::warn!("skipped calibration record {reason}");
+                }
+                return Ok((path, record));
+            }
+            Err(e) => rejected.push(e.to_string()),
+        }
+    }
+    if rejected.is_empty() {
+        Err(CalibrationStoreError::None(dir.to_path_buf()))
+    } else {
+        Err(CalibrationStoreError::NoneValid {
+            dir: dir.to_path_buf(),
+            rejected,
+        })
+    }
+}
+
+/// Largest calibration record read (a real one is a few kB).
+pub const MAX_RECORD_BYTES: u64 = 4 << 20;
+
+/// One record file.
+pub fn load_record(path: &Path) -> Result<CalibrationRecord, CalibrationStoreError> {
+    let io = |source| CalibrationStoreError::Io {
+        path: path.to_path_buf(),
         source,
-    })?;
-    let record = serde_json::from_str(&text).map_err(|source| CalibrationStoreError::Json {
-        path: path.clone(),
+    };
+    let size = std::fs::metadata(path).map_err(io)?.len();
+    if size > MAX_RECORD_BYTES {
+        return Err(CalibrationStoreError::TooLarge {
+            path: path.to_path_buf(),
+            bytes: size,
+        });
+    }
+    let text = std::fs::read_to_string(path).map_err(io)?;
+    serde_json::from_str(&text).map_err(|source| CalibrationStoreError::Json {
+        path: path.to_path_buf(),
         source,
-    })?;
-    Ok((path, record))
+    })
 }

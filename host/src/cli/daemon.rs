@@ -45,6 +45,10 @@ pub struct DaemonArgs {
     /// Stream rate while idle (Hz); experiments use their own.
     #[arg(long, default_value_t = 2000)]
     stream_hz: u16,
+    /// Most HTTP connections open at once; at the cap the oldest connection that has not
+    /// sent the token is closed for a newcomer.
+    #[arg(long, default_value_t = host::daemon::listener::MAX_CONNECTIONS, value_parser = clap::value_parser!(usize))]
+    max_connections: usize,
 }
 
 /// The repository's shipped table.
@@ -119,6 +123,7 @@ pub fn run(args: DaemonArgs) -> ExitCode {
                 default_lut()
             }
         }),
+        max_connections: args.max_connections,
         device: DeviceConfig {
             idle_stream_hz: args.stream_hz,
             link,
@@ -138,7 +143,15 @@ pub fn run(args: DaemonArgs) -> ExitCode {
                 },
                 args.records.display()
             );
-            handle.wait();
+            // SIGTERM / SIGINT: vent and stop the device, close the records, exit.
+            let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+            for signal in [signal_hook::consts::SIGTERM, signal_hook::consts::SIGINT] {
+                if let Err(e) = signal_hook::flag::register(signal, std::sync::Arc::clone(&stop)) {
+                    eprintln!("warning: cannot handle signal {signal}: {e}");
+                }
+            }
+            handle.wait_until(&stop);
+            eprintln!("tactile daemon stopped");
             ExitCode::SUCCESS
         }
         Err(e) => {

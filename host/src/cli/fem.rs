@@ -37,13 +37,13 @@ pub struct CurveArgs {
     #[arg(long, allow_negative_numbers = true)]
     pub pressure: f64,
     /// Sample thickness in mm (default: the paper's gelatin, 7 mm).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub thickness: Option<f64>,
     /// Sample radius in mm (default 45 mm).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub sample_radius: Option<f64>,
     /// Coulomb friction coefficient (default 0: frictionless).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub friction: Option<f64>,
     /// Material law of both bodies.
     #[arg(long, value_enum, default_value = "neo-hookean")]
@@ -54,7 +54,7 @@ pub struct CurveArgs {
     #[arg(long, allow_negative_numbers = true)]
     pub stiffening: Option<f64>,
     /// Final tube travel h in mm (default 2).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub depth: Option<f64>,
     /// Number of load steps (default 40).
     #[arg(long)]

@@ -28,7 +28,7 @@ pub fn default_lut_path() -> PathBuf {
     std::env::var_os("TACTILE_LUT")
         .map(PathBuf::from)
         .unwrap_or_else(|| {
-            PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../fem-core/data/default.lut")
+            fem_core::shipped::default_lut_path()
         })
 }
 

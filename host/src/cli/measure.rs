@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Duration;
 
-use host::calibration::{CalibrationRecord, load_latest};
+use host::calibration::{CalibrationRecord, load_latest, load_record};
 use host::camera::{PixelFormat, V4l2Config, V4l2Source};
 use host::experiment::IndentationPlan;
 use host::experiment::camera_radius::{CameraRadiusSource, capture_reference};
@@ -61,17 +61,12 @@ pub struct MeasureArgs {
 
 /// The shipped production table next to this crate.
 pub fn default_lut_path() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../fem-core/data/default.lut")
+    fem_core::shipped::default_lut_path()
 }
 
 fn load_calibration(args: &MeasureArgs) -> Result<(PathBuf, CalibrationRecord), String> {
     match &args.calibration {
-        Some(p) => {
-            let text = std::fs::read_to_string(p).map_err(|e| format!("{}: {e}", p.display()))?;
-            let r = serde_json::from_str(&text)
-                .map_err(|e| format!("{}: not a calibration record: {e}", p.display()))?;
-            Ok((p.clone(), r))
-        }
+        Some(p) => Ok((p.clone(), load_record(p).map_err(|e| e.to_string())?)),
         None => load_latest(&args.calibration_dir).map_err(|e| e.to_string()),
     }
 }
@@ -101,10 +96,6 @@ pub fn run(args: MeasureArgs) -> ExitCode {
         eprintln!("error: {e}");
         ExitCode::from(1)
     };
-    let record = match RecordDir::create(&out) {
-        Ok(r) => r,
-        Err(e) => return input(e.to_string()),
-    };
     let transport = match SerialTransport::open(&args.port) {
         Ok(t) => t,
         Err(e) => return fail(e.to_string()),
@@ -119,6 +110,12 @@ pub fn run(args: MeasureArgs) -> ExitCode {
     ) {
         Ok(l) => l,
         Err(e) => return fail(e.to_string()),
+    };
+    // The record folder is made once the controller answers, and removed again if the
+    // run fails before anything was written to it.
+    let record = match RecordDir::create(&out) {
+        Ok(r) => r,
+        Err(e) => return input(e.to_string()),
     };
     tracing::info!(calibration = %cal_path.display(), lut = %lut_path.display(), "measuring");
     let plan = IndentationPlan {
@@ -175,6 +172,13 @@ pub fn run(args: MeasureArgs) -> ExitCode {
             }
             ExitCode::SUCCESS
         }
-        Err(e) => fail(format!("{e} (record: {})", out.display())),
+        Err(e) => {
+            let empty = std::fs::read_dir(&out).is_ok_and(|mut d| d.next().is_none());
+            if empty && std::fs::remove_dir(&out).is_ok() {
+                fail(format!("{e} (nothing was recorded)"))
+            } else {
+                fail(format!("{e} (partial record: {})", out.display()))
+            }
+        }
     }
 }

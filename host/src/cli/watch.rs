@@ -17,6 +17,13 @@ pub struct WatchArgs {
 }
 
 pub fn run(args: WatchArgs) -> ExitCode {
+    use std::io::IsTerminal as _;
+    if !(std::io::stdout().is_terminal() && std::io::stdin().is_terminal()) {
+        eprintln!(
+            "error: tactile watch draws a live view and needs a terminal; without one, read the live feed (GET /v1/events, see docs/daemon-api.md) or poll `tactile status`"
+        );
+        return ExitCode::from(2);
+    }
     let client = match args.daemon.client() {
         Ok(c) => c,
         Err(e) => {
@@ -52,7 +59,14 @@ pub fn run(args: WatchArgs) -> ExitCode {
         eprintln!("error: cannot start the feed reader");
         return ExitCode::FAILURE;
     }
-    let mut terminal = ratatui::init();
+    let mut terminal = match ratatui::try_init() {
+        Ok(t) => t,
+        Err(e) => {
+            ratatui::restore();
+            eprintln!("error: tactile watch cannot use this terminal ({e})");
+            return ExitCode::from(2);
+        }
+    };
     let mut closed = false;
     let result = loop {
         for e in rx.try_iter() {

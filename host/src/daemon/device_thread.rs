@@ -110,21 +110,39 @@ impl DeviceThread {
 
     /// Runs until shut down.
     pub fn run(mut self) {
+        // After a stop the link is reopened at once and commands wait for it (the reconnect
+        // takes a few tens of ms); after a loss or a failed attempt they are refused.
+        let mut after_stop = false;
         loop {
             if self.shared.lock().shutdown {
                 return;
             }
-            self.refuse_commands("device not connected");
-            match self.connect() {
+            if !after_stop {
+                self.refuse_commands("device not connected");
+            }
+            match self.connect(after_stop) {
                 Ok(link) => {
                     self.close_gap(&link);
                     match self.serve(link) {
                         ServeEnd::Shutdown => return,
-                        ServeEnd::Stopped => {}
-                        ServeEnd::Lost(reason) => self.open_gap(reason),
+                        ServeEnd::Stopped => after_stop = true,
+                        ServeEnd::Lost(reason) => {
+                            after_stop = false;
+                            self.open_gap(reason);
+                        }
                     }
                 }
                 Err(e) => {
+                    if after_stop && self.shared.switch.is_locked() {
+                        // Another stop went out while the link reopened: reopen again.
+                        continue;
+                    }
+                    if after_stop {
+                        // The device is not answering on the reopened port: from here on it
+                        // is a lost link, with its gap on record.
+                        after_stop = false;
+                        self.open_gap(e.clone());
+                    }
                     self.shared.lock().status.last_error = Some(e);
                     self.poll_calibration();
                     std::thread::sleep(Duration::from_millis(100));
@@ -171,11 +189,16 @@ impl DeviceThread {
         }
     }
 
-    fn connect(&mut self) -> Result<Link, String> {
+    /// Opens the link. `after_stop`: reopening after a stop, when a stop requested since
+    /// then must still go out (on the new link's first write); otherwise a pending stop is
+    /// forgotten (a device that was lost and came back has rebooted vented and stopped).
+    fn connect(&mut self, after_stop: bool) -> Result<Link, String> {
         let path = self.locate()?;
         let transport = SerialTransport::open(&path).map_err(|e| e.to_string())?;
         let switch = Arc::clone(&self.shared.switch);
-        switch.clear_pending();
+        if !after_stop {
+            switch.clear_pending();
+        }
         switch.unlock();
         let guarded = GuardedTransport::new(Box::new(transport), Arc::clone(&switch));
         let mut link =

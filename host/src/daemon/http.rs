@@ -30,6 +30,7 @@ use super::api::{
     StopReport, VentRequest,
 };
 use super::guarded_transport::StopKind;
+use super::listener::{BODY_READ_TIMEOUT, Connection};
 use super::shared::{CancelError, Command, Shared};
 use super::token::tokens_equal;
 
@@ -97,9 +98,17 @@ where
     type Rejection = Response;
 
     async fn from_request(req: Request, state: &S) -> Result<Self, Self::Rejection> {
-        match Json::<T>::from_request(req, state).await {
-            Ok(Json(v)) => Ok(Body(v)),
-            Err(rejection) => {
+        let read = tokio::time::timeout(BODY_READ_TIMEOUT, Json::<T>::from_request(req, state));
+        match read.await {
+            Err(_) => Err(error(
+                StatusCode::REQUEST_TIMEOUT,
+                format!(
+                    "request body not received within {} s",
+                    BODY_READ_TIMEOUT.as_secs()
+                ),
+            )),
+            Ok(Ok(Json(v))) => Ok(Body(v)),
+            Ok(Err(rejection)) => {
                 let status = rejection.status();
                 let text = rejection.body_text();
                 Err(error(status, format!("request body: {text}")))
@@ -139,15 +148,20 @@ async fn guard(State(app): State<App>, req: Request, next: Next) -> Response {
         )
             .into_response();
     }
+    if let Some(conn) = req.extensions().get::<Arc<Connection>>() {
+        conn.authenticate();
+    }
     next.run(req).await
 }
 
+/// `Authorization: Bearer <token>`; the scheme name is case-insensitive (RFC 9110, 11.1).
 fn authorized(headers: &HeaderMap, token: &str) -> bool {
     headers
         .get(header::AUTHORIZATION)
         .and_then(|h| h.to_str().ok())
-        .and_then(|h| h.strip_prefix("Bearer "))
-        .is_some_and(|t| tokens_equal(t.trim(), token))
+        .and_then(|h| h.trim_start().split_once(' '))
+        .filter(|(scheme, _)| scheme.eq_ignore_ascii_case("bearer"))
+        .is_some_and(|(_, t)| tokens_equal(t.trim(), token))
 }
 
 /// The router with every route and the security layer.
@@ -346,7 +360,11 @@ fn list_dir(dir: &std::path::Path, dirs: bool) -> Vec<String> {
     let mut names: Vec<String> = std::fs::read_dir(dir)
         .map(|it| {
             it.filter_map(Result::ok)
-                .filter(|e| e.file_type().is_ok_and(|t| t.is_dir() == dirs))
+                // `file_type` does not follow links: a symlink is neither, and is not listed.
+                .filter(|e| {
+                    e.file_type()
+                        .is_ok_and(|t| if dirs { t.is_dir() } else { t.is_file() })
+                })
                 .filter_map(|e| e.file_name().to_str().map(String::from))
                 .filter(|n| !n.starts_with('.') && n != "calibrations")
                 .collect()
@@ -365,7 +383,31 @@ async fn get_calibration(State(app): State<App>, Path(name): Path<String>) -> Re
         Ok(n) => n,
         Err(r) => return error(StatusCode::BAD_REQUEST, r),
     };
-    send_file(&app.shared.calibrations_dir.join(name)).await
+    match real_entry(&app.shared.calibrations_dir, &[name], false) {
+        Some(path) => send_file(&path).await,
+        None => error(StatusCode::NOT_FOUND, format!("no calibration {name}")),
+    }
+}
+
+/// `base/parts...` if every part below `base` is a real directory (and the last a regular
+/// file unless `dir`), never a symbolic link: a link planted in the records or
+/// calibrations folder must not serve what it points to.
+fn real_entry(base: &std::path::Path, parts: &[&str], dir: bool) -> Option<std::path::PathBuf> {
+    let mut path = base.to_path_buf();
+    for (k, part) in parts.iter().enumerate() {
+        path.push(part);
+        let meta = std::fs::symlink_metadata(&path).ok()?;
+        let last = k + 1 == parts.len();
+        let ok = if last && !dir {
+            meta.file_type().is_file()
+        } else {
+            meta.file_type().is_dir()
+        };
+        if !ok {
+            return None;
+        }
+    }
+    Some(path)
 }
 
 async fn list_records(State(app): State<App>) -> Response {
@@ -389,10 +431,9 @@ async fn list_record_files(State(app): State<App>, Path(name): Path<String>) -> 
         Ok(n) => n,
         Err(r) => return error(StatusCode::BAD_REQUEST, r),
     };
-    let dir = app.shared.records_dir.join(name);
-    if !dir.is_dir() {
+    let Some(dir) = real_entry(&app.shared.records_dir, &[name], true) else {
         return error(StatusCode::NOT_FOUND, format!("no record {name}"));
-    }
+    };
     Json(list_dir(&dir, false)).into_response()
 }
 
@@ -404,7 +445,10 @@ async fn get_record_file(
         (Ok(n), Ok(f)) => (n, f),
         (Err(r), _) | (_, Err(r)) => return error(StatusCode::BAD_REQUEST, r),
     };
-    send_file(&app.shared.records_dir.join(name).join(file)).await
+    match real_entry(&app.shared.records_dir, &[name, file], false) {
+        Some(path) => send_file(&path).await,
+        None => error(StatusCode::NOT_FOUND, format!("no file {file} in record {name}")),
+    }
 }
 
 async fn send_file(path: &std::path::Path) -> Response {

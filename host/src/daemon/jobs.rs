@@ -60,8 +60,15 @@ impl LoadedCalibration {
 
 /// The newest calibration record in `dir`.
 pub fn latest_calibration(dir: &Path) -> Option<LoadedCalibration> {
-    let (path, record) = crate::calibration::record::load_latest(dir).ok()?;
-    Some(LoadedCalibration { path, record })
+    load_calibration(dir).ok()
+}
+
+/// The newest valid calibration, or why there is none (naming the rejected files).
+pub fn load_calibration(
+    dir: &Path,
+) -> Result<LoadedCalibration, crate::calibration::CalibrationStoreError> {
+    let (path, record) = crate::calibration::record::load_latest(dir)?;
+    Ok(LoadedCalibration { path, record })
 }
 
 /// Calibration on the simulated bench: camera px/mm from rendered reference discs and the
@@ -151,17 +158,19 @@ pub fn run_experiment(dt: &mut DeviceThread, link: &mut Link, job: Job) -> Optio
         dt.finish_job(job.id, JobState::Failed, "no parameters".into(), None);
         return None;
     };
-    let Some(cal) = latest_calibration(&dt.shared.calibrations_dir) else {
-        dt.finish_job(
-            job.id,
-            JobState::Failed,
-            format!(
-                "no calibration in {}: run a calibration first (POST /v1/calibrations on the simulated bench)",
-                dt.shared.calibrations_dir.display()
-            ),
-            None,
-        );
-        return None;
+    let cal = match load_calibration(&dt.shared.calibrations_dir) {
+        Ok(cal) => cal,
+        Err(e) => {
+            dt.finish_job(
+                job.id,
+                JobState::Failed,
+                format!(
+                    "{e} (on the simulated bench: POST /v1/calibrations makes one)"
+                ),
+                None,
+            );
+            return None;
+        }
     };
     let (Some(proximity), Some(px)) = (cal.proximity_near(request.pressure_kpa), cal.px_per_mm())
     else {

@@ -12,6 +12,8 @@
 //! - [`device_thread`]: the thread that owns the link; [`jobs`]: experiments and
 //!   calibrations; [`live_radius`] and [`fit_worker`]: live a–u_s points and the running fit;
 //! - [`shared`]: state shared between the HTTP side and the device thread;
+//! - [`listener`]: the accept loop and its limits (connection cap, header and body
+//!   timeouts);
 //! - [`server`]: start/stop; [`client`]: the blocking HTTP client of `tactile status|stop|
 //!   run|watch`.
 //!
@@ -24,6 +26,7 @@ pub mod fit_worker;
 pub mod guarded_transport;
 pub mod http;
 pub mod jobs;
+pub mod listener;
 pub mod live_radius;
 pub mod server;
 pub mod shared;

@@ -12,6 +12,7 @@ use tokio::sync::broadcast;
 use super::device_thread::{DeviceConfig, DeviceSource, DeviceThread};
 use super::guarded_transport::StopSwitch;
 use super::http::{Access, App, router};
+use super::listener::ConnectionStats;
 use super::shared::{Command, Shared};
 use super::token::{TokenError, load_or_create_token};
 
@@ -26,6 +27,8 @@ pub struct DaemonOptions {
     pub records_dir: PathBuf,
     pub lut_path: PathBuf,
     pub device: DeviceConfig,
+    /// Connection cap of the HTTP side (see [`super::listener`]).
+    pub max_connections: usize,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -59,6 +62,8 @@ pub struct DaemonHandle {
     pub token: String,
     pub token_created: bool,
     pub shared: Arc<Shared>,
+    /// Counters of the accept loop (open, evicted, refused connections).
+    pub connections: Arc<ConnectionStats>,
     /// The simulated cable, when running on hil-sim.
     #[cfg(feature = "sim")]
     pub sim_plug: Option<hil_sim::bench::BenchPlug>,
@@ -140,6 +145,9 @@ pub fn start(options: DaemonOptions) -> Result<DaemonHandle, DaemonError> {
         access: Arc::new(Access::for_addr(addr, token.clone())),
     };
     let (shutdown_tx, shutdown_rx) = tokio::sync::oneshot::channel::<()>();
+    let connections = Arc::new(ConnectionStats::default());
+    let connection_stats = Arc::clone(&connections);
+    let max_connections = options.max_connections;
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_io()
         .enable_time()
@@ -152,11 +160,14 @@ pub fn start(options: DaemonOptions) -> Result<DaemonHandle, DaemonError> {
                 let Ok(listener) = tokio::net::TcpListener::from_std(listener) else {
                     return;
                 };
-                let _ = axum::serve(listener, router(app))
-                    .with_graceful_shutdown(async move {
-                        let _ = shutdown_rx.await;
-                    })
-                    .await;
+                super::listener::serve(
+                    listener,
+                    router(app),
+                    max_connections,
+                    connection_stats,
+                    shutdown_rx,
+                )
+                .await;
             });
         })
         .map_err(|e| DaemonError::Start(e.to_string()))?;
@@ -165,6 +176,7 @@ pub fn start(options: DaemonOptions) -> Result<DaemonHandle, DaemonError> {
         token,
         token_created,
         shared,
+        connections,
         #[cfg(feature = "sim")]
         sim_plug,
         #[cfg(feature = "sim")]
@@ -186,6 +198,17 @@ impl DaemonHandle {
     pub fn wait(mut self) {
         if let Some(h) = self.http.take() {
             let _ = h.join();
+        }
+        self.stop_inner();
+    }
+
+    /// Blocks until the HTTP server ends or `stop` is set (by a signal handler); then
+    /// stops like [`Self::shutdown`]: a final emergency stop, records closed, threads joined.
+    pub fn wait_until(mut self, stop: &std::sync::atomic::AtomicBool) {
+        while !stop.load(std::sync::atomic::Ordering::Relaxed)
+            && self.http.as_ref().is_some_and(|h| !h.is_finished())
+        {
+            std::thread::sleep(std::time::Duration::from_millis(10));
         }
         self.stop_inner();
     }

@@ -15,7 +15,7 @@ use crate::link::LinkConfig;
 
 /// The repository's shipped production lookup table (for real hardware).
 pub fn shipped_lut() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../fem-core/data/default.lut")
+    fem_core::shipped::default_lut_path()
 }
 
 /// The table of the simulated bench: the demo's fit fixture (a full modulus x pressure
@@ -34,6 +34,25 @@ pub fn start_sim_daemon(
     token_file: &Path,
     idle_stream_hz: u16,
 ) -> Result<DaemonHandle, DaemonError> {
+    start_sim_daemon_capped(
+        scenario,
+        listen,
+        records_dir,
+        token_file,
+        idle_stream_hz,
+        super::listener::MAX_CONNECTIONS,
+    )
+}
+
+/// [`start_sim_daemon`] with another connection cap.
+pub fn start_sim_daemon_capped(
+    scenario: Option<Scenario>,
+    listen: SocketAddr,
+    records_dir: &Path,
+    token_file: &Path,
+    idle_stream_hz: u16,
+    max_connections: usize,
+) -> Result<DaemonHandle, DaemonError> {
     let lut = sim_lut();
     let scenario = scenario.unwrap_or_else(|| super::jobs::default_sim_scenario(&lut));
     let bench = start_bench(scenario.clone(), BenchOptions::default())
@@ -48,6 +67,7 @@ pub fn start_sim_daemon(
         token_file: token_file.to_path_buf(),
         records_dir: records_dir.to_path_buf(),
         lut_path: lut,
+        max_connections,
         device: DeviceConfig {
             idle_stream_hz,
             // The simulation can fall behind the wall clock on a loaded machine.

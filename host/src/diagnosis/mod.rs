@@ -261,6 +261,14 @@ pub fn diagnose(
     let start = Instant::now();
     data::sort_points(&mut points);
     let mut notes = Vec::new();
+    let given = points.len();
+    for (p, k) in data::bin_points(&mut points, data::MAX_POINTS_PER_PRESSURE) {
+        notes.push(format!(
+            "{p} kPa: more than {} points, so consecutive points of each replicate were averaged in bins of {k} ({given} points in, {} analysed in all)",
+            data::MAX_POINTS_PER_PRESSURE,
+            points.len()
+        ));
+    }
     let model = Model::new(base, effects).map_err(DiagnoseError::Model)?;
     let cands = candidates::library(&model);
     if model.axis(tables::EffectAxis::Stiffening).is_none() {

@@ -167,7 +167,7 @@ pub fn effect_grids() -> Vec<(EffectAxis, LutGrid)> {
 
 /// Directory of the shipped tables (fem-core/data).
 pub fn shipped_tables_dir() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../fem-core/data")
+    fem_core::shipped::data_dir()
 }
 
 /// Builds the table of `axis` with fem-core's solver (in parallel on the rayon pool) and

@@ -65,7 +65,28 @@ pub enum FitError {
     NoCoverage(String),
     #[error("table: {0}")]
     Lut(#[from] fem_core::lut::LutError),
+    #[error("{points} points: the fit takes at most {MAX_FIT_POINTS}; thin or split the curve")]
+    TooManyPoints { points: usize },
+    #[error(
+        "only {in_contact} of {total} points are in contact (a_mm > 0); an indentation curve needs at least 3"
+    )]
+    NoContact { in_contact: usize, total: usize },
+    #[error(
+        "the model does not describe this curve: RMS residual {rms_mm:.4} mm against a spread of a of {spread_mm:.4} mm (at most {MISFIT_FLOOR_MM} mm or half the spread is accepted); is it an a–u_s indentation curve at the stated pressure?"
+    )]
+    ModelMismatch { rms_mm: f64, spread_mm: f64 },
 }
+
+/// Most points one fit takes (memory and time grow linearly; a 6-repeat experiment at
+/// 60 frames/s has a few thousand).
+pub const MAX_FIT_POINTS: usize = 200_000;
+/// Goodness-of-fit gate: an RMS radius residual up to this is always accepted (four times
+/// the camera's typical 0.005 mm noise)...
+pub const MISFIT_FLOOR_MM: f64 = 0.02;
+/// ...and above it only while it is at most this fraction of the standard deviation of the
+/// measured radii (the model explains at least 75 % of their variance). Noise that the
+/// model cannot describe has a residual as large as its spread and is refused.
+pub const MISFIT_FRACTION: f64 = 0.5;
 
 /// How the interval was computed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -581,6 +602,18 @@ pub fn fit_modulus(
     points: &[FitPoint],
     options: FitOptions,
 ) -> Result<ModulusFit, FitError> {
+    if points.len() > MAX_FIT_POINTS {
+        return Err(FitError::TooManyPoints {
+            points: points.len(),
+        });
+    }
+    let in_contact = points.iter().filter(|p| p.a_mm > 0.0).count();
+    if in_contact < 3 {
+        return Err(FitError::NoContact {
+            in_contact,
+            total: points.len(),
+        });
+    }
     let pressures_axis = model.pressures_kpa();
     let (pmin, pmax) = (pressures_axis[0], pressures_axis[pressures_axis.len() - 1]);
     let mut pressures: Vec<f64> = Vec::new();
@@ -635,6 +668,22 @@ pub fn fit_modulus(
     let n = core.used.len();
     let sum_sq_a: f64 = core.residuals[..n].iter().map(|r| r * r).sum();
     let rms = (sum_sq_a / n as f64).sqrt();
+    let spread = {
+        let mean = core.used.iter().map(|&i| points[i].a_mm).sum::<f64>() / n as f64;
+        (core
+            .used
+            .iter()
+            .map(|&i| (points[i].a_mm - mean).powi(2))
+            .sum::<f64>()
+            / n as f64)
+            .sqrt()
+    };
+    if !(rms <= MISFIT_FLOOR_MM.max(MISFIT_FRACTION * spread)) {
+        return Err(FitError::ModelMismatch {
+            rms_mm: rms,
+            spread_mm: spread,
+        });
+    }
     let s_total: f64 = core.residuals.iter().map(|r| r * r).sum();
     let jj: f64 = core.jacobian.iter().map(|j| j * j).sum();
     let m_total = core.residuals.len();

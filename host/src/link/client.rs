@@ -18,6 +18,11 @@ use super::transport::{Transport, TransportError};
 use super::units::SampleUnits;
 use crate::camera::host_clock;
 
+/// Quiet time that ends the drain of stale input when a link opens.
+const DRAIN_QUIET: Duration = Duration::from_millis(20);
+/// Longest drain of stale input when a link opens.
+const DRAIN_LIMIT: Duration = Duration::from_millis(100);
+
 /// Timeouts and retry policy.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LinkConfig {
@@ -173,7 +178,9 @@ impl Link {
             config,
             info: placeholder_info(),
             units: SampleUnits::new(&placeholder_info()),
-            next_seq: 1,
+            // A fresh sequence range per connection, so that a late reply to the previous
+            // connection's request cannot complete one of ours (0xFFF0.. is kept for stops).
+            next_seq: 1 + (host_clock::now_us() % 0xF000) as u16,
             replies: Vec::new(),
             pending_pings: Vec::new(),
             clock: ClockMap::new(),
@@ -184,14 +191,17 @@ impl Link {
             stats: LinkStats::default(),
             last_version_error: None,
         };
-        // Whatever a previous session left in flight is not ours.
+        // Whatever a previous session left in flight is not ours: read until the line has
+        // been quiet for `DRAIN_QUIET`, but for no longer than `DRAIN_LIMIT` (a device that
+        // is still streaming, e.g. after an emergency stop, never falls silent; whatever
+        // arrives after that is decoded, and a stale reply matches no sequence number).
         let mut buf = [0u8; 4096];
-        while link
-            .transport
-            .read_timeout(&mut buf, Duration::from_millis(20))?
-            > 0
+        let drain_end = host_clock::now_us() + DRAIN_LIMIT.as_micros() as u64;
+        while link.transport.read_timeout(&mut buf, DRAIN_QUIET)? > 0
+            && host_clock::now_us() < drain_end
         {}
         link.decoder.reset();
+        link.samples.clear();
         let hello = Request::Hello {
             host_protocol_version: PROTOCOL_VERSION,
         };

@@ -87,10 +87,19 @@ pub fn list_serial_ports() -> Result<Vec<SerialPortEntry>, String> {
         .collect())
 }
 
+/// What to check when libusb cannot start: it needs the usbfs device nodes.
+pub fn usb_access_hint() -> &'static str {
+    if !std::path::Path::new("/dev/bus/usb").exists() {
+        "/dev/bus/usb does not exist (no usbfs: inside a container, pass the USB devices through, e.g. --device /dev/bus/usb)"
+    } else {
+        "/dev/bus/usb is there but could not be used: check its permissions (a udev rule for VID 1209 and 2E8A, or the plugdev group)"
+    }
+}
+
 /// Our devices and RP2040 boot ROMs on the USB; `Err` with a note when USB is not
 /// accessible (no usbfs in a container, no permissions).
 pub fn list_usb_devices() -> Result<Vec<UsbEntry>, String> {
-    let ctx = rusb::Context::new().map_err(|e| format!("no USB access: {e}"))?;
+    let ctx = rusb::Context::new().map_err(|e| format!("no USB access ({e}): {}", usb_access_hint()))?;
     let devices = ctx
         .devices()
         .map_err(|e| format!("no USB access: cannot list devices: {e}"))?;

@@ -25,7 +25,12 @@ impl RusbPicoboot {
     /// Opens the first RP2040 in BOOTSEL mode; `Ok(None)` if there is none.
     pub fn open_first() -> Result<Option<Self>, PicobootError> {
         let ctx = rusb::Context::new()
-            .map_err(|e| PicobootError::Usb(format!("no USB access ({e}); is usbfs mounted?")))?;
+            .map_err(|e| {
+                PicobootError::Usb(format!(
+                    "no USB access ({e}): {}",
+                    crate::usb::discovery::usb_access_hint()
+                ))
+            })?;
         for device in ctx.devices().map_err(usb)?.iter() {
             let Ok(desc) = device.device_descriptor() else {
                 continue;
