@@ -98,7 +98,6 @@ impl Default for MechanicsSource {
     }
 }
 
-
 /// Largest simulated frame side (a 4096x4096 grey frame is 16 MB; the sensor's camera
 /// is far smaller).
 pub const MAX_CAMERA_SIDE_PX: usize = 4096;

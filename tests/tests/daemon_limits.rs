@@ -155,12 +155,19 @@ fn symbolic_links_in_the_records_are_not_served() {
     std::fs::write(records.join("real/meta.json"), "{\"status\":\"complete\"}").unwrap();
     std::os::unix::fs::symlink("/", records.join("root")).unwrap();
     std::os::unix::fs::symlink("/etc/passwd", records.join("real/passwd.csv")).unwrap();
-    std::os::unix::fs::symlink("/etc/passwd", records.join("calibrations/calibration-9.json"))
-        .unwrap();
+    std::os::unix::fs::symlink(
+        "/etc/passwd",
+        records.join("calibrations/calibration-9.json"),
+    )
+    .unwrap();
     let get = |path: &str| d.client.raw("GET", path, None, &[], true).unwrap();
     let r = get("/v1/records");
     assert_eq!(r.status, 200);
-    assert!(r.body.contains("real") && !r.body.contains("root"), "{}", r.body);
+    assert!(
+        r.body.contains("real") && !r.body.contains("root"),
+        "{}",
+        r.body
+    );
     assert_eq!(get("/v1/records/real/meta.json").status, 200);
     let r = get("/v1/records/real");
     assert!(!r.body.contains("passwd"), "{}", r.body);

@@ -14,7 +14,5 @@ pub use procedures::{
     proximity_sweep, tare_load,
 };
 pub use proximity::{ProximityCalibration, ProximityError};
-pub use record::{
-    CalibrationRecord, CalibrationStoreError, load_latest, load_record, save_record,
-};
+pub use record::{CalibrationRecord, CalibrationStoreError, load_latest, load_record, save_record};
 pub use rigid_sample::{RIGID_MODULUS_KPA, RigidSampleCurve, RigidSampleError};

@@ -447,7 +447,10 @@ async fn get_record_file(
     };
     match real_entry(&app.shared.records_dir, &[name, file], false) {
         Some(path) => send_file(&path).await,
-        None => error(StatusCode::NOT_FOUND, format!("no file {file} in record {name}")),
+        None => error(
+            StatusCode::NOT_FOUND,
+            format!("no file {file} in record {name}"),
+        ),
     }
 }
 

@@ -164,9 +164,7 @@ pub fn run_experiment(dt: &mut DeviceThread, link: &mut Link, job: Job) -> Optio
             dt.finish_job(
                 job.id,
                 JobState::Failed,
-                format!(
-                    "{e} (on the simulated bench: POST /v1/calibrations makes one)"
-                ),
+                format!("{e} (on the simulated bench: POST /v1/calibrations makes one)"),
                 None,
             );
             return None;

@@ -213,7 +213,10 @@ mod tests {
         assert_eq!(pts[3].t_s, None);
         assert!(pts[..7].iter().all(|q| q.p_air_kpa == 6.0));
         assert_eq!(pts[4].test, 1);
-        assert_eq!(&pts[7..].iter().map(|q| q.u_s_mm).collect::<Vec<_>>(), &[0.0, 1.0, 2.0, 3.0]);
+        assert_eq!(
+            &pts[7..].iter().map(|q| q.u_s_mm).collect::<Vec<_>>(),
+            &[0.0, 1.0, 2.0, 3.0]
+        );
     }
 
     #[test]

@@ -99,7 +99,8 @@ pub fn usb_access_hint() -> &'static str {
 /// Our devices and RP2040 boot ROMs on the USB; `Err` with a note when USB is not
 /// accessible (no usbfs in a container, no permissions).
 pub fn list_usb_devices() -> Result<Vec<UsbEntry>, String> {
-    let ctx = rusb::Context::new().map_err(|e| format!("no USB access ({e}): {}", usb_access_hint()))?;
+    let ctx =
+        rusb::Context::new().map_err(|e| format!("no USB access ({e}): {}", usb_access_hint()))?;
     let devices = ctx
         .devices()
         .map_err(|e| format!("no USB access: cannot list devices: {e}"))?;

@@ -24,13 +24,12 @@ fn usb(e: rusb::Error) -> PicobootError {
 impl RusbPicoboot {
     /// Opens the first RP2040 in BOOTSEL mode; `Ok(None)` if there is none.
     pub fn open_first() -> Result<Option<Self>, PicobootError> {
-        let ctx = rusb::Context::new()
-            .map_err(|e| {
-                PicobootError::Usb(format!(
-                    "no USB access ({e}): {}",
-                    crate::usb::discovery::usb_access_hint()
-                ))
-            })?;
+        let ctx = rusb::Context::new().map_err(|e| {
+            PicobootError::Usb(format!(
+                "no USB access ({e}): {}",
+                crate::usb::discovery::usb_access_hint()
+            ))
+        })?;
         for device in ctx.devices().map_err(usb)?.iter() {
             let Ok(desc) = device.device_descriptor() else {
                 continue;
