@@ -678,7 +678,7 @@ pub fn fit_modulus(
             / n as f64)
             .sqrt()
     };
-    if !(rms <= MISFIT_FLOOR_MM.max(MISFIT_FRACTION * spread)) {
+    if rms.is_nan() || rms > MISFIT_FLOOR_MM.max(MISFIT_FRACTION * spread) {
         return Err(FitError::ModelMismatch {
             rms_mm: rms,
             spread_mm: spread,
