@@ -27,7 +27,7 @@ pub struct FitArgs {
 pub fn default_lut_path() -> PathBuf {
     std::env::var_os("TACTILE_LUT")
         .map(PathBuf::from)
-        .unwrap_or_else(|| fem_core::shipped::default_lut_path())
+        .unwrap_or_else(fem_core::shipped::default_lut_path)
 }
 
 pub fn run(args: FitArgs) -> ExitCode {
