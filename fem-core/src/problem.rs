@@ -406,9 +406,9 @@ impl Indentation {
         model.newton.stall_iterations = settings.stall_iterations;
         // round-off floor of the residual: stresses carry ~1e-16 relative error of the
         // stiffest modulus over ~mm^2 areas, and the Euclidean norm of N such independent
-        // errors grows like sqrt(N): calibrated at the production mesh (under 8000 dofs) and
-        // scaled up for finer ones (levels above 0) (without it a rigid sample's finest meshes stall at
-        // 1.4 times the unscaled floor, level 2: 2.3e-3 against 1.7e-3)
+        // errors grows like sqrt(N): calibrated at the production mesh (under 8000 dofs),
+        // scaled up for finer ones (without it the uniform level 2 stalls on a rigid sample
+        // at 1.4 times the unscaled floor: 2.3e-3 against 1.7e-3)
         let stiffest = model
             .materials
             .iter()
