@@ -102,10 +102,33 @@ def solve(p_air, n_arc, n_thick, multiplier=10.0, steps_per_mm=20, verbose=False
     start = z_apex_outer - mesh.points[sets["centre"], 0]
     out = []
     n = int(round(max(DEPTHS) * steps_per_mm))
+
+    def advance(h_from, h_to, depth=0):
+        # the plane's step from h_from to h_to, halved on failure (at most 6 times)
+        checkpoint = field.checkpoint()
+        try:
+            plate.update([start + h_to, 0.0])
+            res = newton([solid, pressure, contact])
+            if not res.success:
+                raise RuntimeError(f"no convergence at h = {h_to:.4f} mm")
+            return res
+        except Exception:
+            if depth >= 6:
+                raise
+            field.restore(checkpoint)
+            mid = 0.5 * (h_from + h_to)
+            advance(h_from, mid, depth + 1)
+            return advance(mid, h_to, depth + 1)
+
+    h_prev = 0.0
     for k in range(0, n + 1):
         h = max(DEPTHS) * k / n
-        plate.update([start + h, 0.0])
-        res = newton([solid, pressure, contact])
+        try:
+            res = advance(h_prev, h)
+        except Exception:  # a limit point (the unpressurised shell snaps through)
+            print(f"  felupe {n_arc}: no equilibrium found beyond h = {h_prev:.4f} mm", flush=True)
+            break
+        h_prev = h
         if any(abs(h - d) < 1e-9 for d in DEPTHS):
             x = mesh.points + u.values
             z_plane = x[sets["centre"], 0]
@@ -162,7 +185,10 @@ def main():
         print("  h mm | " + " | ".join(f"felupe {n}: a mm  P N  u_s mm" for n in levels)
               + " | fem-core: a mm  P N  u_s mm")
         for i, h in enumerate(DEPTHS):
-            cols = [f"{res[n][i][1]:.4f} {res[n][i][2]:.4f} {res[n][i][3]:.5f}" for n in levels]
+            cols = [
+                f"{res[n][i][1]:.4f} {res[n][i][2]:.4f} {res[n][i][3]:.5f}" if i < len(res[n]) else "-"
+                for n in levels
+            ]
             fc = ref.get(round(h, 4))
             fcs = f"{fc[0]:.4f} {fc[1]:.4f} {fc[2]:.5f}" if fc else "-"
             print(f"  {h:.1f} | " + " | ".join(cols) + f" | {fcs}", flush=True)
