@@ -4,10 +4,11 @@
 //! Solver modules, one concept each: [`shape`] (Q9 basis, Gauss rule), [`mesh`] (mapped
 //! structured meshes), [`material`] (neo-Hookean / linear in mixed u–p form), [`element`]
 //! (Q9/P1 condensed mixed element), [`pressure_load`] (follower pressure), [`contact`]
-//! (node-to-segment augmented-Lagrangian contact), [`linear_solver`] (faer sparse Cholesky),
+//! (node-to-segment augmented-Lagrangian contact), [`contact_edge`] (the contact radius), [`linear_solver`] (faer sparse Cholesky),
 //! [`model`] (assembly and Newton–Raphson), [`problem`] (the paper's two-stage indentation).
 
 pub mod contact;
+pub mod contact_edge;
 pub mod curve;
 pub mod element;
 pub mod error;

@@ -144,24 +144,68 @@ pub struct ShellMesh {
     pub outer_apex: usize,
 }
 
-/// Build the shell block into `mesh` as body `body`.
+/// Local refinement of the hemisphere along the arc where the contact edge travels: from the
+/// apex to the polar angle `fine_angle_rad` the elements are `refinement` times shorter than
+/// the uniform ones; beyond it they grow geometrically (ratio `growth`) back to the uniform
+/// size. `refinement` 1 is the uniform arc.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ArcGrading {
+    pub refinement: usize,
+    pub fine_angle_rad: f64,
+    pub growth: f64,
+}
+
+impl ArcGrading {
+    /// The uniform arc.
+    pub const UNIFORM: Self = Self {
+        refinement: 1,
+        fine_angle_rad: 0.0,
+        growth: 1.3,
+    };
+
+    /// Element edges (polar angles, apex to equator) for `arc` uniform elements.
+    pub fn edges(&self, arc: usize) -> Vec<f64> {
+        let quarter = std::f64::consts::FRAC_PI_2;
+        let coarse = quarter / arc as f64;
+        if self.refinement <= 1 || self.fine_angle_rad <= 0.0 {
+            return (0..=arc).map(|k| quarter * k as f64 / arc as f64).collect();
+        }
+        let fine = coarse / self.refinement as f64;
+        graded_edges_capped(quarter, fine, self.fine_angle_rad, self.growth, coarse)
+    }
+}
+
+/// Build the shell block into `mesh` as body `body` (uniform along the arc).
 pub fn add_shell(
     mesh: &mut Mesh,
     geometry: &ShellGeometry,
     div: &ShellDivisions,
     body: usize,
 ) -> ShellMesh {
-    let n_arc_nodes = 2 * div.arc + 1;
+    add_shell_graded(mesh, geometry, div, &ArcGrading::UNIFORM, body)
+}
+
+/// Build the shell block into `mesh` as body `body`, its arc graded by `grading`
+/// (`div.arc` counts the uniform elements the grading refines).
+pub fn add_shell_graded(
+    mesh: &mut Mesh,
+    geometry: &ShellGeometry,
+    div: &ShellDivisions,
+    grading: &ArcGrading,
+    body: usize,
+) -> ShellMesh {
+    let phis = with_midpoints(&grading.edges(div.arc));
+    let arc = (phis.len() - 1) / 2;
+    let n_arc_nodes = 2 * arc + 1;
     let n1 = n_arc_nodes + 2 * div.skirt;
     let n2 = 2 * div.thickness + 1;
     let g = *geometry;
-    let arc = div.arc;
     let skirt = div.skirt;
     let block = mesh.add_block(n1, n2, body, |i, j| {
         let t = g.inner_radius_mm
             + (g.outer_radius_mm - g.inner_radius_mm) * j as f64 / (n2 - 1) as f64;
         if i < n_arc_nodes {
-            let phi = std::f64::consts::FRAC_PI_2 * i as f64 / (2 * arc) as f64;
+            let phi = phis[i];
             if i == 0 {
                 [0.0, -t]
             } else {
@@ -205,8 +249,11 @@ pub struct SampleGeometry {
 /// Element sizes of the sample mesh.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SampleGrading {
-    /// Element size in the contact zone (near the axis, at the top).
+    /// Radial element size in the contact zone (near the axis, at the top): the spacing of
+    /// the contact surface's nodes.
     pub fine_size_mm: f64,
+    /// Element size through the uniformly meshed layer under the top surface.
+    pub fine_depth_size_mm: f64,
     /// Radius of the uniformly meshed contact zone.
     pub fine_radius_mm: f64,
     /// Depth of the uniformly meshed layer under the top surface.
@@ -247,6 +294,33 @@ pub fn graded_edges(length: f64, fine: f64, fine_len: f64, growth: f64) -> Vec<f
     edges
 }
 
+/// Like [`graded_edges`], but the growing sizes stop at `max_size` and continue uniformly
+/// (the last one stretched or merged so that the interval is covered exactly).
+pub fn graded_edges_capped(
+    length: f64,
+    fine: f64,
+    fine_len: f64,
+    growth: f64,
+    max_size: f64,
+) -> Vec<f64> {
+    let fine_len = fine_len.min(length);
+    let n_fine = ((fine_len / fine) - 1e-9).ceil().max(1.0) as usize;
+    let size = fine_len / n_fine as f64;
+    let mut edges: Vec<f64> = (0..=n_fine).map(|k| k as f64 * size).collect();
+    let mut h = size;
+    let mut x = fine_len;
+    while x < length - 1e-12 {
+        h = (h * growth).min(max_size);
+        if x + 1.5 * h >= length {
+            edges.push(length);
+            break;
+        }
+        x += h;
+        edges.push(x);
+    }
+    edges
+}
+
 /// Node positions (element edges plus mid points) from element edges.
 fn with_midpoints(edges: &[f64]) -> Vec<f64> {
     let mut out = Vec::with_capacity(2 * edges.len() - 1);
@@ -276,7 +350,7 @@ pub fn add_sample(
     // depth below the top surface, then ordered bottom -> top
     let mut z_nodes: Vec<f64> = with_midpoints(&graded_edges(
         geometry.thickness_mm,
-        grading.fine_size_mm,
+        grading.fine_depth_size_mm,
         grading.fine_depth_mm,
         grading.growth,
     ))
@@ -331,5 +405,27 @@ mod tests {
         assert_eq!(mesh.nodes[shell.inner_apex], [0.0, -4.6]);
         assert_eq!(mesh.nodes[shell.outer_apex], [0.0, -5.0]);
         assert_eq!(shell.clamped.len(), 7);
+    }
+
+    #[test]
+    fn graded_arc_is_fine_near_the_apex_and_covers_the_quarter() {
+        let grading = ArcGrading {
+            refinement: 4,
+            fine_angle_rad: 0.9,
+            growth: 1.3,
+        };
+        let e = grading.edges(40);
+        let quarter = std::f64::consts::FRAC_PI_2;
+        assert!((e[e.len() - 1] - quarter).abs() < 1e-12);
+        assert!(e.windows(2).all(|w| w[1] > w[0]));
+        // fine elements up to the fine angle (at most quarter / 160 each, a whole number of
+        // them), none much longer than the uniform ones
+        let fine = quarter / 160.0;
+        assert!(e[1] <= fine && e[1] > 0.95 * fine);
+        assert!(
+            e.windows(2)
+                .all(|w| w[1] - w[0] <= 1.5 * quarter / 40.0 + 1e-12)
+        );
+        assert_eq!(ArcGrading::UNIFORM.edges(8).len(), 9);
     }
 }

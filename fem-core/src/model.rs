@@ -112,7 +112,8 @@ pub struct Model {
     n_equations: usize,
     /// Nodes of the pressurised surface from the axis outwards (3-node edges).
     pub pressure_surface: Vec<usize>,
-    pub contact: Option<ContactPair>,
+    /// Contact pairs (one per pass of a two-pass contact; empty without contact).
+    pub contacts: Vec<ContactPair>,
     pub newton: NewtonSettings,
     solver: SymmetricSolver,
     /// Reference geometry of each element at its Gauss points (`None`: degenerate).
@@ -162,7 +163,7 @@ impl Model {
             prescribed: vec![0.0; n_dofs],
             n_equations: 0,
             pressure_surface: Vec::new(),
-            contact: None,
+            contacts: Vec::new(),
             newton: NewtonSettings::default(),
             solver: SymmetricSolver::default(),
             newton_iterations: 0,
@@ -350,7 +351,7 @@ impl Model {
                 }
             }
         }
-        if let Some(contact) = &self.contact {
+        for contact in &self.contacts {
             let pos = |n: usize| self.position(u, n);
             for term in contact.active_terms(&pos, with_tangent) {
                 let n = 2 * term.nodes.len();

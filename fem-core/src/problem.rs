@@ -19,12 +19,13 @@ use std::time::Instant;
 
 use crate::FemError;
 use crate::contact::ContactPair;
+use crate::contact_edge::contact_edge_mm;
 use crate::curve::{ContactPressureSample, Curve, CurveParams, CurvePoint};
 use crate::element::Formulation;
 use crate::material::Material;
 use crate::mesh::{
-    Mesh, SampleGeometry, SampleGrading, SampleMesh, ShellDivisions, ShellGeometry, ShellMesh,
-    add_sample, add_shell,
+    ArcGrading, Mesh, SampleGeometry, SampleGrading, SampleMesh, ShellDivisions, ShellGeometry,
+    ShellMesh, add_sample, add_shell_graded,
 };
 use crate::model::{Model, NewtonFailure, NewtonSettings};
 
@@ -45,26 +46,40 @@ pub const SHELL_SKIRT_MM: f64 = 4.0;
 
 /// How the per-step outputs are post-processed from the converged state; recorded in the
 /// tables' solver description so a table built with another definition is detected.
-pub const OUTPUT_DEFINITIONS: &str = "contact radius: weighted g^(2/3) edge extrapolation over open node pairs (v2); tables: \
+pub const OUTPUT_DEFINITIONS: &str = "contact radius: weighted quadratic g^(2/3) edge extrapolation over open node triples, merged contact passes (v3); tables: \
      a curve whose stage 2 stops converging keeps its converged steps (truncated)";
 
 /// Mesh description derived from `mesh_level`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MeshSpec {
     pub shell: ShellDivisions,
+    /// Local refinement of the shell's arc where the contact edge travels.
+    pub shell_arc_grading: ArcGrading,
     /// Sample element size in the contact zone and its extent.
     pub sample_fine_size_mm: f64,
+    /// Sample element size through the fine layer under the top surface.
+    pub sample_depth_size_mm: f64,
     pub sample_fine_radius_mm: f64,
     pub sample_fine_depth_mm: f64,
     pub sample_growth: f64,
 }
 
 impl MeshSpec {
-    /// Level 0 is the production mesh (0.2 mm Q9 elements in the contact zone and along
-    /// the shell, 2 through the wall); each +1 halves every element size.
+    /// Level 0 is the production mesh (0.2 mm Q9 elements along the shell and in the
+    /// sample's contact zone, 2 through the wall, with the production edge refinement
+    /// [`EDGE_REFINEMENT`] along the contact surfaces); each +1 halves every element size.
     pub fn for_level(level: i32) -> Self {
+        Self::with_edge_refinement(level, EDGE_REFINEMENT)
+    }
+
+    /// Level `level` (see [`Self::for_level`]) with the elements along both contact
+    /// surfaces, where the contact edge travels (the shell's arc up to
+    /// [`CONTACT_ARC_RAD`], the sample's top up to 4.5 mm), `refinement` times shorter;
+    /// the element sizes through the wall and into the sample are those of the level.
+    pub fn with_edge_refinement(level: i32, refinement: usize) -> Self {
         let scale = 2f64.powi(level);
         let size = 0.2 / scale;
+        let k = refinement.max(1);
         let arc_len = std::f64::consts::FRAC_PI_2 * (SHELL_OUTER_RADIUS_MM - 0.5 * SHELL_WALL_MM);
         Self {
             shell: ShellDivisions {
@@ -72,13 +87,40 @@ impl MeshSpec {
                 skirt: (SHELL_SKIRT_MM / (3.0 * size)).ceil().max(1.0) as usize,
                 thickness: (2.0 * scale).round().max(1.0) as usize,
             },
-            sample_fine_size_mm: size,
+            shell_arc_grading: ArcGrading {
+                refinement: k,
+                fine_angle_rad: CONTACT_ARC_RAD,
+                growth: 1.3,
+            },
+            sample_fine_size_mm: size / k as f64,
+            sample_depth_size_mm: size,
             sample_fine_radius_mm: 4.5,
             sample_fine_depth_mm: 1.0,
             sample_growth: 1.3,
         }
     }
 }
+
+/// Which surfaces carry the node-to-segment contact constraints.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ContactPasses {
+    /// The sample's top nodes against the shell's surface (one pass).
+    SampleSlave,
+    /// The shell's outer nodes against the sample's surface (one pass).
+    ShellSlave,
+    /// Both (two-pass node-to-segment).
+    TwoPass,
+}
+
+/// Production refinement of the elements along the contact surfaces relative to the
+/// uniform level-0 size (see [`MeshSpec::with_edge_refinement`] and the verification
+/// document's convergence study).
+pub const EDGE_REFINEMENT: usize = 1;
+
+/// Polar angle of the shell's outer surface up to which the contact edge can travel: at
+/// h = 3 mm the contact radius stays below 4.2 mm (sin 57 degrees times R1); beyond it the
+/// arc is meshed uniformly.
+pub const CONTACT_ARC_RAD: f64 = 1.0;
 
 /// Solver controls that are not model parameters.
 #[derive(Debug, Clone, PartialEq)]
@@ -104,6 +146,8 @@ pub struct SolverSettings {
     pub stall_iterations: usize,
     /// Overrides the shell's skirt length (verification problems only).
     pub shell_skirt_mm: f64,
+    /// Contact discretisation (see [`ContactPasses`]).
+    pub contact_passes: ContactPasses,
 }
 
 impl SolverSettings {
@@ -120,6 +164,7 @@ impl SolverSettings {
             max_cuts: 10,
             stall_iterations: 12,
             shell_skirt_mm: SHELL_SKIRT_MM,
+            contact_passes: ContactPasses::SampleSlave,
         }
     }
 }
@@ -258,7 +303,7 @@ impl Indentation {
         sample_top_z_mm: Option<f64>,
     ) -> Self {
         let mut mesh = Mesh::default();
-        let shell = add_shell(
+        let shell = add_shell_graded(
             &mut mesh,
             &ShellGeometry {
                 inner_radius_mm: SHELL_OUTER_RADIUS_MM - SHELL_WALL_MM,
@@ -266,10 +311,12 @@ impl Indentation {
                 skirt_length_mm: settings.shell_skirt_mm,
             },
             &settings.mesh.shell,
+            &settings.mesh.shell_arc_grading,
             0,
         );
         let grading = SampleGrading {
             fine_size_mm: settings.mesh.sample_fine_size_mm,
+            fine_depth_size_mm: settings.mesh.sample_depth_size_mm,
             fine_radius_mm: settings.mesh.sample_fine_radius_mm,
             fine_depth_mm: settings.mesh.sample_fine_depth_mm,
             growth: settings.mesh.sample_growth,
@@ -319,14 +366,28 @@ impl Indentation {
             // to the apex (outward normal pointing out of the shell)
             let mut masters = shell.outer_surface.clone();
             masters.reverse();
-            model.contact = Some(ContactPair::new(
-                s.top.clone(),
-                masters,
-                &model.mesh.nodes,
-                penalty,
-                settings.contact_smoothing * settings.mesh.sample_fine_size_mm,
-            ));
-            if let Some(c) = model.contact.as_mut() {
+            let smoothing = settings.contact_smoothing * settings.mesh.sample_fine_size_mm;
+            if settings.contact_passes != ContactPasses::ShellSlave {
+                model.contacts.push(ContactPair::new(
+                    s.top.clone(),
+                    masters,
+                    &model.mesh.nodes,
+                    penalty,
+                    smoothing,
+                ));
+            }
+            if settings.contact_passes != ContactPasses::SampleSlave {
+                // second pass: the shell's outer surface (apex to equator) as slave on the
+                // sample's top (axis outwards: outward normal +z, out of the sample)
+                model.contacts.push(ContactPair::new(
+                    shell.outer_surface.clone(),
+                    s.top.clone(),
+                    &model.mesh.nodes,
+                    penalty,
+                    smoothing,
+                ));
+            }
+            for c in &mut model.contacts {
                 c.friction = params.friction;
                 // Wriggers sec. 5.2's viscous regularisation with the tube travel as the
                 // pseudo-time: the slip over which the law reaches mu f_N is a fixed slip
@@ -337,22 +398,29 @@ impl Indentation {
                     SLIP_RATE_REGULARISATION * params.max_depth_mm / params.steps.max(1) as f64;
             }
         }
-        if let Some(contact) = &model.contact {
+        let mut pairs = Vec::new();
+        for contact in &model.contacts {
             // the bodies slide by well under 1.5 mm relative to each other (h <= 3 mm)
-            let pairs = contact.candidate_node_pairs(&model.mesh.nodes, 1.5);
+            pairs.extend(contact.candidate_node_pairs(&model.mesh.nodes, 1.5));
+        }
+        if !pairs.is_empty() {
             model.reserve_node_couplings(&pairs);
         }
         model.newton.max_correction_mm =
             settings.max_correction * settings.mesh.sample_fine_size_mm;
         model.newton.stall_iterations = settings.stall_iterations;
         // round-off floor of the residual: stresses carry ~1e-16 relative error of the
-        // stiffest modulus over ~mm^2 areas
+        // stiffest modulus over ~mm^2 areas, and the Euclidean norm of N such independent
+        // errors grows like sqrt(N): calibrated at the production mesh (under 8000 dofs),
+        // scaled up for finer ones (without it the uniform level 2 stalls on a rigid sample
+        // at 1.4 times the unscaled floor: 2.3e-3 against 1.7e-3)
         let stiffest = model
             .materials
             .iter()
             .map(|m| m.kappa_kpa)
             .fold(0.0, f64::max);
-        model.newton.absolute_tolerance = 1e-12 * stiffest;
+        let dof_scale = (model.n_dofs() as f64 / 8000.0).sqrt().max(1.0);
+        model.newton.absolute_tolerance = 1e-12 * stiffest * dof_scale;
         let clamp_z_dofs = shell.clamped.iter().map(|&n| 2 * n + 1).collect();
         Self {
             model,
@@ -441,17 +509,22 @@ impl Indentation {
         self.newton_logged(u, p_kpa, false)?;
         for _ in 0..settings.augmentations {
             let model = &self.model;
-            let Some(contact) = &model.contact else {
+            if model.contacts.is_empty() {
                 break;
-            };
+            }
             let pos = |n: usize| model.position(u, n);
-            if contact.max_penetration(&pos) <= settings.penetration_tolerance_mm {
+            let penetration = model
+                .contacts
+                .iter()
+                .map(|c| c.max_penetration(&pos))
+                .fold(0.0, f64::max);
+            if penetration <= settings.penetration_tolerance_mm {
                 break;
             }
             let pos_nodes: Vec<[f64; 2]> = (0..model.mesh.nodes.len())
                 .map(|n| model.position(u, n))
                 .collect();
-            if let Some(contact) = &mut self.model.contact {
+            for contact in &mut self.model.contacts {
                 contact.augment(&|n: usize| pos_nodes[n]);
             }
             // same state and load, updated multipliers: the last tangent still fits
@@ -468,42 +541,63 @@ impl Indentation {
         let mut load_mn = 0.0;
         let mut a_mm = 0.0;
         let mut contact_pressure = Vec::new();
-        if let Some(contact) = &model.contact {
+        if let (Some(sample), false) = (&self.sample, model.contacts.is_empty()) {
             let pos = |n: usize| model.position(u, n);
-            // the slave (sample) z residual is -f dg/dz_s = f |n_z|: the downward push
-            for term in contact.active_terms(&pos, false) {
-                load_mn += term.residual[1];
+            let top0 = sample.top[0];
+            let top_index = |n: usize| (n >= top0 && n < top0 + sample.top.len()).then(|| n - top0);
+            let sample_start = sample.block.node_offset;
+            // nodal contact forces on the sample's top (normal force of its slave nodes,
+            // reactions of the shell's slave nodes on its segments) and the load: the
+            // downward push on the sample, the sum of the z residuals of its nodes
+            let mut forces = vec![0.0; sample.top.len()];
+            // merged gap profile of all slave nodes: (current position, gap, force-free gap,
+            // indicator)
+            let mut profile: Vec<([f64; 2], Option<f64>, f64, f64)> = Vec::new();
+            for contact in &model.contacts {
+                for term in contact.active_terms(&pos, false) {
+                    for (i, &n) in term.nodes.iter().enumerate() {
+                        if n >= sample_start {
+                            load_mn += term.residual[2 * i + 1];
+                        }
+                        if let Some(t) = top_index(n) {
+                            forces[t] += if i == 0 {
+                                term.normal_force
+                            } else {
+                                term.residual[2 * i].hypot(term.residual[2 * i + 1])
+                            };
+                        }
+                    }
+                }
+                let eps = contact.penalty_kpa_per_mm;
+                for (s, g) in contact.slave_gaps(&pos).into_iter().enumerate() {
+                    // contact indicator: pressure per reference area inside, -eps * gap
+                    // outside
+                    let q = match g {
+                        Some(g) => contact.multipliers[s] / contact.slave_areas_mm2[s] - eps * g,
+                        None => f64::NEG_INFINITY,
+                    };
+                    profile.push((pos(contact.slaves[s]), g, -q / eps, q));
+                }
             }
-            let gaps = contact.slave_gaps(&pos);
-            let current: Vec<[f64; 2]> = contact.slaves.iter().map(|&n| pos(n)).collect();
-            let eps = contact.penalty_kpa_per_mm;
-            // contact indicator: pressure per reference area inside, -eps * gap outside
-            let indicator: Vec<f64> = gaps
-                .iter()
-                .enumerate()
-                .map(|(s, g)| match g {
-                    Some(g) => contact.multipliers[s] / contact.slave_areas_mm2[s] - eps * g,
-                    None => f64::NEG_INFINITY,
-                })
-                .collect();
+            profile.sort_by(|a, b| a.0[0].total_cmp(&b.0[0]));
+            let current: Vec<[f64; 2]> = profile.iter().map(|p| p.0).collect();
+            let gaps: Vec<Option<f64>> = profile.iter().map(|p| p.1).collect();
+            let open_gaps: Vec<f64> = profile.iter().map(|p| p.2).collect();
             // the contact zone is a disc: its edge is the crossing after the outermost node
             // in contact (single nodes near the axis may stand off by round-off of the
             // quadratic surface, so the scan does not stop at the first open node)
-            let last_in = indicator.iter().rposition(|&q| q > 0.0);
-            let end = last_in.map_or(0, |k| (k + 1).min(indicator.len() - 1));
-            if let Some(k) = last_in {
-                let open_gaps: Vec<f64> = indicator.iter().map(|q| -q / eps).collect();
+            if let Some(k) = profile.iter().rposition(|p| p.3 > 0.0) {
                 a_mm = contact_edge_mm(&current, &gaps, &open_gaps, k, self.edge_gap_floor_mm);
             }
-            let forces: Vec<f64> = indicator
+            let top_current: Vec<[f64; 2]> = sample.top.iter().map(|&n| pos(n)).collect();
+            let end = forces
                 .iter()
-                .zip(&contact.slave_areas_mm2)
-                .map(|(q, a)| (q * a).max(0.0))
-                .collect();
-            let pressures = consistent_pressure(&current, &forces, end);
+                .rposition(|&f| f > 0.0)
+                .map_or(0, |k| (k + 1).min(forces.len() - 1));
+            let pressures = consistent_pressure(&top_current, &forces, end);
             for s in 0..=end {
                 contact_pressure.push(ContactPressureSample {
-                    r_mm: current[s][0],
+                    r_mm: top_current[s][0],
                     pressure_kpa: pressures[s],
                 });
             }
@@ -555,73 +649,6 @@ fn consistent_pressure(current: &[[f64; 2]], forces: &[f64], end: usize) -> Vec<
         }
     }
     out
-}
-
-/// Contact radius from the slave nodes' current positions `current`, gaps `gaps` and
-/// force-free gaps `open_gaps` (`-indicator / eps`: the gap beyond which the node carries no
-/// force; it equals the gap for nodes without an augmented-Lagrangian multiplier),
-/// `k` being the outermost node with a positive indicator (the fallback edge).
-///
-/// Outside a smooth frictionless contact the gap grows like `(r - a)^{3/2}` (Hertz,
-/// Sneddon), so `s = g^{2/3}` is linear in r near the edge and each pair of consecutive open
-/// nodes (j, j + 1) extrapolates an edge `a_j = r_j - s_j (r_{j+1} - r_j) / (s_{j+1} - s_j)`.
-/// Using only the first open pair makes `a` jump (by up to ~0.05 mm at 0.1 mm node spacing)
-/// whenever a node closes or a small augmented-Lagrangian force flips which node is "first".
-/// Instead `a` is the weighted mean of all pair estimates with weights that are continuous
-/// functions of the solution and vanish smoothly where a pair is invalid:
-///
-/// - `w_d = d exp(-d^2 / 2)` with `d = s_j / (s_{j+1} - s_j)`, the distance of node j from
-///   its edge estimate in node spacings (0 at a closing node, negligible beyond ~3 spacings
-///   where `(r - a)^{3/2}` is no longer accurate; 0 for a non-increasing pair);
-/// - `w_g = smoothstep(open_gap_j / g_floor - 1)`, 0 for nodes whose force-free gap is below
-///   `g_floor` (round-off stand-off, nodes held by a multiplier), 1 above `2 g_floor`.
-///
-/// So `a` is a continuous function of the converged state (no node set is chosen by a
-/// threshold), and round-off differences in the state move it by round-off amounts. If no
-/// pair has weight (e.g. the contact reaches the end of the surface) the zero crossing of
-/// the indicator between node k and k + 1 is used.
-fn contact_edge_mm(
-    current: &[[f64; 2]],
-    gaps: &[Option<f64>],
-    open_gaps: &[f64],
-    k: usize,
-    g_floor_mm: f64,
-) -> f64 {
-    let r = |i: usize| current[i][0];
-    let smoothstep = |x: f64| {
-        let t = x.clamp(0.0, 1.0);
-        t * t * (3.0 - 2.0 * t)
-    };
-    let (mut sum_w, mut sum_wa) = (0.0, 0.0);
-    for j in 0..current.len().saturating_sub(1) {
-        let (Some(g0), Some(g1)) = (gaps[j], gaps[j + 1]) else {
-            continue;
-        };
-        if g0 <= 0.0 || g1 <= g0 {
-            continue;
-        }
-        let w_g = smoothstep(open_gaps[j] / g_floor_mm - 1.0);
-        if w_g == 0.0 {
-            continue;
-        }
-        let (s0, s1) = (g0.powf(2.0 / 3.0), g1.powf(2.0 / 3.0));
-        let d = s0 / (s1 - s0);
-        let w = w_g * d * (-0.5 * d * d).exp();
-        let a = r(j) - d * (r(j + 1) - r(j));
-        if w > 0.0 && a.is_finite() {
-            sum_w += w;
-            sum_wa += w * a;
-        }
-    }
-    if sum_w > 0.0 {
-        return sum_wa / sum_w;
-    }
-    if k + 1 >= current.len() {
-        return r(k);
-    }
-    let (q0, q1) = (-open_gaps[k], -open_gaps[k + 1]);
-    let t = if q1.is_finite() { q0 / (q0 - q1) } else { 0.0 };
-    r(k) + t.clamp(0.0, 1.0) * (r(k + 1) - r(k))
 }
 
 /// Consecutive step cuts after which stalled Newton iterations are no longer abandoned early.
@@ -792,7 +819,12 @@ fn solve_stages(
     for k in 1..=params.steps {
         let h_from = dh * (k - 1) as f64;
         let h_to = dh * k as f64;
-        let saved = ind.model.contact.as_ref().map(|c| c.multipliers.clone());
+        let saved: Vec<Vec<f64>> = ind
+            .model
+            .contacts
+            .iter()
+            .map(|c| c.multipliers.clone())
+            .collect();
         let committed = std::cell::RefCell::new(saved);
         let ind_cell = std::cell::RefCell::new(&mut ind);
         let stepped = continuation(
@@ -816,21 +848,24 @@ fn solve_stages(
             },
             || {
                 let mut ind = ind_cell.borrow_mut();
-                if let (Some(c), Some(saved)) =
-                    (ind.model.contact.as_mut(), committed.borrow().as_ref())
-                {
+                for (c, saved) in ind.model.contacts.iter_mut().zip(committed.borrow().iter()) {
                     c.multipliers.clone_from(saved);
                 }
             },
             |before: &[f64], after: &[f64]| {
                 let mut ind = ind_cell.borrow_mut();
-                *committed.borrow_mut() = ind.model.contact.as_ref().map(|c| c.multipliers.clone());
+                *committed.borrow_mut() = ind
+                    .model
+                    .contacts
+                    .iter()
+                    .map(|c| c.multipliers.clone())
+                    .collect();
                 let h_before = ind.clamp_z_dofs.first().map_or(0.0, |&d| -before[d]);
                 ind.previous = Some((h_before, before.to_vec()));
                 let positions: Vec<[f64; 2]> = (0..ind.model.mesh.nodes.len())
                     .map(|n| ind.model.position(after, n))
                     .collect();
-                if let Some(c) = ind.model.contact.as_mut() {
+                for c in &mut ind.model.contacts {
                     c.commit_slip_state(&|n: usize| positions[n]);
                 }
             },

@@ -43,7 +43,7 @@ fn assembled_tangent_matches_finite_differences_in_contact() {
         }
     }
     // dofs to probe: contact slaves and masters near the axis, an inner-surface node
-    let contact = model.contact.as_ref().unwrap();
+    let contact = model.contacts.first().unwrap();
     let mut probe: Vec<usize> = Vec::new();
     for &s in contact.slaves.iter().take(12).step_by(3) {
         probe.extend([2 * s, 2 * s + 1]);

@@ -23,7 +23,7 @@ fn frictional_tangent_matches_finite_differences_of_the_residual() {
     let settings = SolverSettings::for_level(-2);
     let (_, ind, state) = solve_curve_state(&params, &settings).unwrap();
     let model = &ind.model;
-    let contact = model.contact.as_ref().unwrap();
+    let contact = model.contacts.first().unwrap();
     // slide the sample's top outwards by a few slip-regularisation widths relative to the
     // last converged (committed) state, so the friction force is in its sliding branch
     let mut u = state.clone();

@@ -1,4 +1,4 @@
-//! Mesh convergence of the production mesh (issue 4): a and P at h = 1.7 mm must change by
+//! Mesh convergence of the production mesh: a and P at h = 1.7 mm must change by
 //! less than 0.5 % and 1 % between mesh_level 0 and one uniform refinement (level 1).
 //! Slow (level 1 has ~4x the unknowns): `cargo test -p fem-core --release -- --ignored`.
 
@@ -36,4 +36,45 @@ fn contact_radius_and_load_converge_at_the_production_mesh() {
     );
     assert!(da < 5e-3, "a changes by {da}");
     assert!(dp < 1e-2, "P changes by {dp}");
+}
+
+/// The production mesh against 4 times shorter elements along both contact surfaces
+/// (`MeshSpec::with_edge_refinement`), rigid plate at 6 kPa, 34 steps to 1.7 mm: the bounds
+/// are the measured differences (docs/fem-verification.md: a 28.5 um against k = 8, P
+/// 0.28 %, u_s 0.14 um) with ~25 % margin, so a regression of the contact-edge estimate or
+/// of the contact discretisation fails here. Slow (~10 s release):
+/// `cargo test -p fem-core --release --test mesh_convergence -- --ignored`.
+#[test]
+#[ignore = "a 4x edge-refined solve; run in release with --ignored"]
+fn contact_radius_at_the_production_mesh_is_within_its_documented_error() {
+    use fem_core::problem::{MeshSpec, SolverSettings};
+    let params = CurveParams {
+        sample_modulus_kpa: 1e7,
+        max_depth_mm: 1.7,
+        steps: 34,
+        ..Default::default()
+    };
+    let production = solve_curve(&params).unwrap();
+    let mut settings = SolverSettings::for_level(0);
+    settings.mesh = MeshSpec::with_edge_refinement(0, 4);
+    settings.penetration_tolerance_mm = 5e-4 * settings.mesh.sample_fine_size_mm;
+    let fine = fem_core::solve_curve_with(&params, &settings).unwrap();
+    let (mut da, mut dp, mut dus) = (0.0f64, 0.0f64, 0.0f64);
+    for (p, q) in production.points.iter().zip(&fine.points) {
+        if p.h_mm < 0.2 - 1e-9 {
+            continue;
+        }
+        da = da.max((p.a_mm - q.a_mm).abs());
+        dp = dp.max((p.load_n / q.load_n - 1.0).abs());
+        dus = dus.max((p.u_s_mm - q.u_s_mm).abs());
+    }
+    println!(
+        "max differences: a {:.2} um, P {:.3} %, u_s {:.2} um",
+        1e3 * da,
+        1e2 * dp,
+        1e3 * dus
+    );
+    assert!(da < 0.035, "a differs by {da} mm");
+    assert!(dp < 3.5e-3, "P differs by {dp}");
+    assert!(dus < 0.5e-3, "u_s differs by {dus} mm");
 }

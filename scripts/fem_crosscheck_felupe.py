@@ -1,0 +1,198 @@
+#!/usr/bin/env python3
+"""Independent check of fem-core's rigid-plate curves with felupe (not part of CI).
+
+The probe's shell (hemisphere R1 = 5 mm, wall 0.4 mm, cylindrical skirt 4 mm clamped on its
+inner surface; E1 = 2300 kPa, nu1 = 0.49) is modelled in felupe as an axisymmetric mixed
+(u, p, J) nearly-incompressible neo-Hookean solid (Q1/P0/P0, Hu-Washizu
+`ThreeFieldVariation`), inflated by a follower pressure on its inner hemispherical surface
+(`SolidBodyPressure`, normal force per deformed area), then pressed by a rigid frictionless
+plane (`ContactRigidPlane`) that moves towards the tube by h. felupe's axisymmetric frame
+is (z, r). Outputs per depth: the contact radius a (linear extrapolation of g^(2/3) from
+the first two open outer-surface nodes, the (r - a)^(3/2) gap law), the load P (the plane's
+reaction) and u_s (inner apex displacement relative to the tube, zero after inflation).
+Every case is solved on a sequence of meshes (elements along the arc and through the wall
+doubled each time), so felupe's own mesh convergence is printed next to fem-core's curve
+(`cargo run --release -p fem-core --example curve -- 1e7 P 0 34 1.7`).
+
+Usage: scripts/fem_crosscheck_felupe.sh [--pressures 0,6,15] [--levels 40,80,160]
+Units: mm, kPa, mN (printed loads in N).
+"""
+
+import argparse
+import math
+import subprocess
+import sys
+
+import numpy as np
+
+try:
+    import felupe as fem
+except ImportError:  # the wrapper installs it
+    sys.exit("felupe is not installed: run scripts/fem_crosscheck_felupe.sh")
+
+R_OUT, WALL, SKIRT = 5.0, 0.4, 4.0
+R_IN = R_OUT - WALL
+E1, NU1 = 2300.0, 0.49
+DEPTHS = [0.2, 0.5, 0.8, 1.1, 1.4, 1.7]
+
+
+def shell_mesh(n_arc, n_thick):
+    n_skirt = max(1, round(n_arc * SKIRT / (0.5 * math.pi * (R_OUT - 0.5 * WALL)) / 3))
+    n1, n2 = n_arc + n_skirt, n_thick
+    rect = fem.mesh.Rectangle(n=(n1 + 1, n2 + 1))
+    x, y = rect.points[:, 0], rect.points[:, 1]
+    i = np.rint(x * n1).astype(int)
+    t = R_IN + WALL * y  # felupe's axisymmetric frame is (z, r): keeps the Jacobian positive
+    phi = 0.5 * math.pi * np.minimum(i, n_arc) / n_arc
+    r = np.where(i <= n_arc, t * np.sin(phi), t)
+    z = np.where(i <= n_arc, -t * np.cos(phi), SKIRT * (i - n_arc) / n_skirt)
+    points = np.column_stack([z, r])
+    points = np.vstack([points, [-R_OUT - 1.0, 0.0]])
+    mesh = fem.Mesh(points, rect.cells, "quad")
+    inner = np.isclose(t, R_IN)
+    sets = {
+        "axis": np.flatnonzero(np.isclose(points[:-1, 1], 0.0)),
+        "clamp": np.flatnonzero(inner & (i >= n_arc)),
+        "inner_arc": np.append(inner & (i <= n_arc), False),
+        "outer_arc": np.flatnonzero(np.isclose(t, R_OUT) & (i <= n_arc)),
+        "inner_apex": int(np.flatnonzero(inner & (i == 0))[0]),
+        "outer_apex": int(np.flatnonzero(np.isclose(t, R_OUT) & (i == 0))[0]),
+        "centre": len(points) - 1,
+    }
+    return mesh, sets
+
+
+def solve(p_air, n_arc, n_thick, multiplier=10.0, steps_per_mm=20, verbose=False):
+    """Stage 1 (inflation) and stage 2 (the plane moves by h); rows (h, a, P_N, u_s)."""
+    mesh, sets = shell_mesh(n_arc, n_thick)
+    region = fem.RegionQuad(mesh)
+    field = fem.FieldsMixed(region, n=3, axisymmetric=True)
+    mu, bulk = E1 / (2 * (1 + NU1)), E1 / (3 * (1 - 2 * NU1))
+    solid = fem.SolidBody(fem.ThreeFieldVariation(fem.NeoHooke(mu=mu, bulk=bulk)), field)
+    region_p = fem.RegionQuadBoundary(mesh, mask=sets["inner_arc"], ensure_3d=True)
+    field_p = fem.FieldContainer([fem.FieldAxisymmetric(region_p, dim=2)])
+    field_p.link(field)
+    pressure = fem.SolidBodyPressure(field_p, pressure=0.0)
+    u = field[0]
+    idx = np.arange(mesh.npoints)
+    plate = fem.Boundary(u, mask=np.isin(idx, [sets["centre"]]))
+    bounds = {
+        "axis": fem.Boundary(u, mask=np.isin(idx, sets["axis"]), skip=(1, 0)),
+        "clamp": fem.Boundary(u, mask=np.isin(idx, sets["clamp"])),
+        "plate": plate,
+    }
+
+    def newton(items):
+        dof0, dof1 = fem.dof.partition(field, bounds)
+        ext0 = fem.dof.apply(field, bounds, dof0)
+        return fem.newtonrhapson(items=items, x0=field, dof1=dof1, dof0=dof0, ext0=ext0, verbose=0, tol=1e-8, maxiter=40)
+
+    for p in np.linspace(0.0, p_air, 4)[1:]:
+        pressure.update(p)
+        res = newton([solid, pressure])
+    x = mesh.points + u.values
+    if verbose:
+        clamp_force = fem.tools.force(field, res.fun, bounds["clamp"]) if p_air > 0 else None
+        print("  stage 1: outer apex uz", u.values[sets["outer_apex"], 0], "clamp force", clamp_force,
+              "p pi R_in^2 =", p_air * math.pi * R_IN**2)
+    contact = fem.ContactRigidPlane(field, points=sets["outer_arc"], centerpoint=sets["centre"],
+                                    normal=[1.0, 0.0], items=[solid], multiplier=multiplier)
+    z_apex_outer = x[sets["outer_apex"], 0]
+    apex0 = u.values[sets["inner_apex"], 0]
+    start = z_apex_outer - mesh.points[sets["centre"], 0]
+    out = []
+    n = int(round(max(DEPTHS) * steps_per_mm))
+
+    def advance(h_from, h_to, depth=0):
+        # the plane's step from h_from to h_to, halved on failure (at most 6 times)
+        checkpoint = field.checkpoint()
+        try:
+            plate.update([start + h_to, 0.0])
+            res = newton([solid, pressure, contact])
+            if not res.success:
+                raise RuntimeError(f"no convergence at h = {h_to:.4f} mm")
+            return res
+        except Exception:
+            if depth >= 6:
+                raise
+            field.restore(checkpoint)
+            mid = 0.5 * (h_from + h_to)
+            advance(h_from, mid, depth + 1)
+            return advance(mid, h_to, depth + 1)
+
+    h_prev = 0.0
+    for k in range(0, n + 1):
+        h = max(DEPTHS) * k / n
+        try:
+            res = advance(h_prev, h)
+        except Exception:  # a limit point (the unpressurised shell snaps through)
+            print(f"  felupe {n_arc}: no equilibrium found beyond h = {h_prev:.4f} mm", flush=True)
+            break
+        h_prev = h
+        if any(abs(h - d) < 1e-9 for d in DEPTHS):
+            x = mesh.points + u.values
+            z_plane = x[sets["centre"], 0]
+            force = fem.tools.force(field, res.fun, plate)
+            g = x[sets["outer_arc"], 0] - z_plane
+            a = contact_radius(x[sets["outer_arc"]][:, 1], g)
+            out.append((h, a, 1e-3 * abs(force[0]), u.values[sets["inner_apex"], 0] - apex0))
+    return out
+
+
+def contact_radius(r, g):
+    """First-open-pair g^(2/3) extrapolation over the outer nodes (r ascending)."""
+    order = np.argsort(r)
+    r, g = r[order], g[order]
+    closed = np.flatnonzero(g <= 0.0)
+    if len(closed) == 0:
+        return 0.0
+    j = closed[-1] + 1
+    if j + 1 >= len(r):
+        return float(r[closed[-1]])
+    s0, s1 = g[j] ** (2 / 3), g[j + 1] ** (2 / 3)
+    d = s0 / (s1 - s0) if s1 > s0 else 0.0
+    return float(max(r[j] - d * (r[j + 1] - r[j]), r[closed[-1]]))
+
+
+def femcore(p_air):
+    """fem-core's curve at the same depths (34 steps to 1.7 mm, E2 = 1e7 kPa: rigid)."""
+    cmd = ["cargo", "run", "-q", "--release", "-p", "fem-core", "--example", "curve", "--",
+           "1e7", str(p_air), "0", "34", "1.7"]
+    text = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
+    rows = {}
+    for line in text.splitlines():
+        try:
+            h, us, a, load = (float(v) for v in line.split()[:4])
+        except ValueError:
+            continue
+        rows[round(h, 4)] = (a, load, us)
+    return rows
+
+
+def main():
+    ap = argparse.ArgumentParser(description="felupe cross-check of fem-core's rigid-plate curves")
+    ap.add_argument("--pressures", default="0,6,15")
+    ap.add_argument("--levels", default="40,80,160", help="Q1 elements along the arc")
+    ap.add_argument("--wall", type=int, default=2, help="elements through the wall at 40 along the arc")
+    ap.add_argument("--multiplier", type=float, default=10.0, help="contact penalty scale")
+    ap.add_argument("--no-femcore", action="store_true")
+    args = ap.parse_args()
+    levels = [int(v) for v in args.levels.split(",")]
+    for p_air in (float(v) for v in args.pressures.split(",")):
+        print(f"p_air = {p_air:g} kPa, rigid plate, frictionless")
+        ref = {} if args.no_femcore else femcore(p_air)
+        res = {n: solve(p_air, n, max(1, args.wall * n // 40), args.multiplier) for n in levels}
+        print("  h mm | " + " | ".join(f"felupe {n}: a mm  P N  u_s mm" for n in levels)
+              + " | fem-core: a mm  P N  u_s mm")
+        for i, h in enumerate(DEPTHS):
+            cols = [
+                f"{res[n][i][1]:.4f} {res[n][i][2]:.4f} {res[n][i][3]:.5f}" if i < len(res[n]) else "-"
+                for n in levels
+            ]
+            fc = ref.get(round(h, 4))
+            fcs = f"{fc[0]:.4f} {fc[1]:.4f} {fc[2]:.5f}" if fc else "-"
+            print(f"  {h:.1f} | " + " | ".join(cols) + f" | {fcs}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
