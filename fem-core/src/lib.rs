@@ -12,6 +12,7 @@ pub mod contact_edge;
 pub mod curve;
 pub mod element;
 pub mod error;
+pub mod input_file;
 pub mod linear_solver;
 pub mod lut;
 pub mod material;

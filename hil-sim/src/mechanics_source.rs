@@ -127,12 +127,16 @@ pub fn sample_params(sample: &SampleConfig) -> CurveParams {
     }
 }
 
+/// Largest curve file read (a solved curve of 10,000 steps is about 2 MB of JSON).
+pub const MAX_CURVE_FILE_BYTES: u64 = 64 << 20;
+
 /// Reads a `fem_core::Curve` stored as JSON.
 pub fn read_curve_file(path: &Path) -> Result<Curve, MechanicsSourceError> {
-    let text = std::fs::read_to_string(path).map_err(|e| MechanicsSourceError::File {
-        path: path.to_path_buf(),
-        reason: e.to_string(),
-    })?;
+    let text = fem_core::input_file::read_limited_text(path, MAX_CURVE_FILE_BYTES, "a curve")
+        .map_err(|e| MechanicsSourceError::File {
+            path: path.to_path_buf(),
+            reason: e.to_string(),
+        })?;
     serde_json::from_str(&text).map_err(|e| MechanicsSourceError::File {
         path: path.to_path_buf(),
         reason: format!("not a fem-core curve: {e}"),

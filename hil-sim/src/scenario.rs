@@ -102,6 +102,9 @@ impl Default for MechanicsSource {
 /// is far smaller).
 pub const MAX_CAMERA_SIDE_PX: usize = 4096;
 
+/// Largest scenario file read (a scenario is a few hundred lines of TOML).
+pub const MAX_SCENARIO_BYTES: u64 = 1 << 20;
+
 /// The linear stage.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -230,10 +233,11 @@ impl Scenario {
     /// Reads and validates a scenario file; relative paths inside are resolved against the
     /// file's directory.
     pub fn load(path: &Path) -> Result<Self, ScenarioError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ScenarioError::Read {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text = fem_core::input_file::read_limited_text(path, MAX_SCENARIO_BYTES, "a scenario")
+            .map_err(|source| ScenarioError::Read {
+                path: path.to_path_buf(),
+                source,
+            })?;
         let mut s = Self::parse(&text, path)?;
         let base = path.parent().unwrap_or(Path::new("."));
         s.resolve_paths(base);

@@ -136,7 +136,8 @@ pub fn read_curve_csv(path: &Path) -> Result<CurveCsv, CurveCsvError> {
             ),
         });
     }
-    let text = std::fs::read_to_string(path).map_err(io)?;
+    let text = fem_core::input_file::read_limited_text(path, MAX_CURVE_BYTES, "a curve file")
+        .map_err(io)?;
     parse_curve_csv(&text, &file)
 }
 

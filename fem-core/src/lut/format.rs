@@ -201,12 +201,19 @@ pub struct LutFile {
     pub size_bytes: usize,
 }
 
+/// Largest table file read (the shipped tables are well under 10 MB; a production grid ten
+/// times denser in every axis would still fit).
+pub const MAX_LUT_BYTES: u64 = 512 << 20;
+
 /// Read and verify a table file.
 pub fn read_lut(path: &Path) -> Result<LutFile, LutError> {
-    let bytes = std::fs::read(path).map_err(|source| LutError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let bytes =
+        crate::input_file::read_limited(path, MAX_LUT_BYTES, "a table").map_err(|source| {
+            LutError::Io {
+                path: path.to_path_buf(),
+                source,
+            }
+        })?;
     read_lut_bytes(&bytes, &path.display().to_string())
 }
 

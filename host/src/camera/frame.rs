@@ -179,7 +179,13 @@ impl Frame {
             sequence: self.sequence,
             message,
         };
-        let options = DecoderOptions::default().jpeg_set_out_colorspace(ColorSpace::Luma);
+        // The size limits keep a corrupt header from allocating gigabytes (the same bound
+        // as for still images).
+        let side = super::image_file::MAX_IMAGE_SIDE_PX;
+        let options = DecoderOptions::default()
+            .jpeg_set_out_colorspace(ColorSpace::Luma)
+            .set_max_width(side)
+            .set_max_height(side);
         let mut decoder = JpegDecoder::new_with_options(ZCursor::new(&self.data[..]), options);
         decoder
             .decode_headers()

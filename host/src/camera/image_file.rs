@@ -7,12 +7,20 @@ use super::source::CameraError;
 use std::io::Cursor;
 use std::path::Path;
 
+/// Largest image file read (a 16-bit PGM at the largest side is 128 MiB).
+pub const MAX_IMAGE_FILE_BYTES: u64 = 160 << 20;
+
+/// Largest image side accepted, in pixels: far above any in-sensor camera, small enough that
+/// a corrupt header cannot make the decoder allocate gigabytes.
+pub const MAX_IMAGE_SIDE_PX: usize = 8192;
+
 /// Reads a `.pgm` or `.png` file (chosen by content: PNG signature or `P5`/`P2` magic).
 pub fn read_gray_image(path: &Path) -> Result<GrayImage, CameraError> {
-    let bytes = std::fs::read(path).map_err(|source| CameraError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let bytes = fem_core::input_file::read_limited(path, MAX_IMAGE_FILE_BYTES, "an image")
+        .map_err(|source| CameraError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
     decode_gray_image(&bytes).map_err(|message| CameraError::BadFile {
         path: path.to_path_buf(),
         message,
@@ -109,6 +117,11 @@ fn decode_pgm(bytes: &[u8]) -> Result<GrayImage, String> {
     if width == 0 || height == 0 {
         return Err(format!("PGM header: size {width}x{height} is empty"));
     }
+    if width > MAX_IMAGE_SIDE_PX || height > MAX_IMAGE_SIDE_PX {
+        return Err(format!(
+            "PGM header: size {width}x{height} is larger than {MAX_IMAGE_SIDE_PX}x{MAX_IMAGE_SIDE_PX}"
+        ));
+    }
     if !(1..=65535).contains(&maxval) {
         return Err(format!("PGM header: maxval {maxval} not in 1..=65535"));
     }
@@ -156,6 +169,12 @@ fn decode_png(bytes: &[u8]) -> Result<GrayImage, String> {
     let mut reader = decoder
         .read_info()
         .map_err(|e| format!("PNG header: {e}"))?;
+    let (width, height) = (reader.info().width, reader.info().height);
+    if width as usize > MAX_IMAGE_SIDE_PX || height as usize > MAX_IMAGE_SIDE_PX {
+        return Err(format!(
+            "PNG header: size {width}x{height} is larger than {MAX_IMAGE_SIDE_PX}x{MAX_IMAGE_SIDE_PX}"
+        ));
+    }
     let size = reader
         .output_buffer_size()
         .ok_or_else(|| "PNG header: image too large".to_string())?;

@@ -110,6 +110,9 @@ pub fn split_mjpeg(bytes: &[u8]) -> Result<Vec<JpegSpan>, String> {
     Ok(spans)
 }
 
+/// Largest MJPEG recording read into memory (a minute at 60 frames/s of 640x480 is ~150 MB).
+pub const MAX_MJPEG_FILE_BYTES: u64 = 1 << 30;
+
 /// Plays an MJPEG file as [`PixelFormat::Mjpeg`] frames (decode with [`Frame::luma`]).
 #[derive(Debug)]
 pub struct MjpegFileSource {
@@ -123,10 +126,12 @@ pub struct MjpegFileSource {
 impl MjpegFileSource {
     /// Reads and indexes the whole file (recordings are tens of MB at most).
     pub fn open(path: &Path) -> Result<Self, CameraError> {
-        let bytes = std::fs::read(path).map_err(|source| CameraError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let bytes =
+            fem_core::input_file::read_limited(path, MAX_MJPEG_FILE_BYTES, "an MJPEG recording")
+                .map_err(|source| CameraError::Io {
+                    path: path.to_path_buf(),
+                    source,
+                })?;
         let spans = split_mjpeg(&bytes).map_err(|message| CameraError::BadFile {
             path: path.to_path_buf(),
             message,

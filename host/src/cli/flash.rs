@@ -26,7 +26,14 @@ pub struct FlashArgs {
 
 pub fn run(args: FlashArgs) -> ExitCode {
     let path = args.firmware.display().to_string();
-    let elf = match std::fs::read(&args.firmware) {
+    // The RP2040 addresses at most 16 MiB of flash; an ELF with full debug information is
+    // larger than its image but not by this much.
+    const MAX_FIRMWARE_FILE_BYTES: u64 = 256 << 20;
+    let elf = match fem_core::input_file::read_limited(
+        &args.firmware,
+        MAX_FIRMWARE_FILE_BYTES,
+        "a firmware ELF",
+    ) {
         Ok(b) => b,
         Err(e) => {
             eprintln!("error: {path}: {e}");
