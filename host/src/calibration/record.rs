@@ -197,7 +197,9 @@ pub fn load_record(path: &Path) -> Result<CalibrationRecord, CalibrationStoreErr
             bytes: size,
         });
     }
-    let text = std::fs::read_to_string(path).map_err(io)?;
+    let text =
+        fem_core::input_file::read_limited_text(path, MAX_RECORD_BYTES, "a calibration record")
+            .map_err(io)?;
     serde_json::from_str(&text).map_err(|source| CalibrationStoreError::Json {
         path: path.to_path_buf(),
         source,
