@@ -135,3 +135,26 @@ fn regenerating_sample_curves_reproduces_the_stored_ones() {
         }
     }
 }
+
+#[test]
+fn a_table_with_a_nan_radius_and_a_valid_hash_is_refused() {
+    // The hash only proves the bytes are the ones written; the values must still be checked.
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/effects-friction.lut");
+    let bytes = std::fs::read(&path).unwrap();
+    let file = fem_core::lut::read_lut_bytes(&bytes, "effects-friction.lut").unwrap();
+    // The body starts after the third line; the first curve's a_mm column follows its three
+    // scalars and its h_mm and u_s_mm columns.
+    let mut newlines = bytes.iter().enumerate().filter(|(_, b)| **b == b'\n');
+    let hash_line_end = newlines.nth(1).unwrap().0;
+    let body = newlines.next().unwrap().0 + 1;
+    let steps = file.header.curves[0].steps;
+    let a_mm_5 = body + 8 * (3 + 2 * steps + 5);
+    let mut bad = bytes.clone();
+    bad[a_mm_5..a_mm_5 + 8].copy_from_slice(&f64::NAN.to_le_bytes());
+    let hash = fem_core::lut::format::sha256_hex(&bad[hash_line_end + 1..]);
+    bad[hash_line_end - 64..hash_line_end].copy_from_slice(hash.as_bytes());
+    let err = fem_core::lut::read_lut_bytes(&bad, "nan.lut")
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("nan.lut") && err.contains("a_mm"), "{err}");
+}

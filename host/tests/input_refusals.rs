@@ -93,7 +93,10 @@ fn a_negative_radius_is_refused_with_its_line() {
     );
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
     let err = stderr(&out);
-    assert!(err.contains("curve.csv:4:") && err.contains("a_mm"), "{err}");
+    assert!(
+        err.contains("curve.csv:4:") && err.contains("a_mm"),
+        "{err}"
+    );
     std::fs::remove_dir_all(&dir).ok();
 }
 
