@@ -211,3 +211,50 @@ fn a_damaged_newest_calibration_is_skipped_and_named() {
     assert!(err.to_string().contains("calibration-2000.json"), "{err}");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn a_measurement_that_fails_after_connecting_leaves_no_empty_record_folder() {
+    use hil_sim::bench::{BenchOptions, Pacing, start};
+    use hil_sim::scenario::Scenario;
+    let scenario = Scenario::parse(
+        "seed = 3\n[mechanics]\nsource = \"rigid\"\n",
+        Path::new("refusals.toml"),
+    )
+    .unwrap();
+    let bench = start(
+        scenario,
+        BenchOptions {
+            pacing: Pacing::Auto,
+            ..BenchOptions::default()
+        },
+    )
+    .unwrap();
+    let dir = scratch("empty-record");
+    // A record without the proximity calibration the measurement needs: the controller
+    // answers, then the run stops before anything is recorded.
+    let calibration = dir.join("calibration-1000.json");
+    let record = host::calibration::CalibrationRecord::new("SIM-0000000000000003", "0.1.0");
+    std::fs::write(&calibration, serde_json::to_string(&record).unwrap()).unwrap();
+    let out = tactile()
+        .arg("measure")
+        .arg("--port")
+        .arg(bench.pty_path())
+        .args(["--camera", "/dev/null", "--start", "1"])
+        .arg("--calibration")
+        .arg(&calibration)
+        .arg("--out")
+        .arg(dir.join("record"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("nothing was recorded"),
+        "{}",
+        stderr(&out)
+    );
+    assert!(
+        !dir.join("record").exists(),
+        "an empty record folder was left behind"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
