@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Size budget of the RP2040 firmware (issue 3): flash <= 96 KiB, static RAM <= 16 KiB.
+# Size budget of the RP2040 firmware: flash <= 96 KiB, static RAM <= 16 KiB.
 #
 # Reads the ELF's section headers with od (coreutils only; no llvm-size or python needed):
 # - flash = every allocated section placed in flash (0x10000000..0x11000000: boot2, vector

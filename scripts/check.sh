@@ -1,11 +1,15 @@
 #!/usr/bin/env bash
-# The whole test suite: formatting, lints, the no_std checks, every test of the workspace,
-# and the RP2040 firmware's release build with its size budget. This is what CI runs.
+# The whole test suite: the repository's text checks, formatting, lints, the no_std checks,
+# every test of the workspace, and the RP2040 firmware's release build with its size
+# budget. This is what CI runs.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 step() { printf '\n==> %s\n' "$*"; }
 start=$(date +%s)
+
+step "text checks (scripts/check-words.sh)"
+scripts/check-words.sh
 
 step "cargo fmt --check (host workspace)"
 cargo fmt --all --check

@@ -4,7 +4,7 @@
 //! against central differences of the assembled residual in a sliding state, and that
 //! dropping the skew part (the former symmetrised tangent) fails the same check.
 
-// Test helpers may unwrap (COMMON.md).
+// Test helpers may unwrap too (clippy.toml allows it only inside #[test] functions).
 #![allow(clippy::unwrap_used)]
 
 use fem_core::CurveParams;

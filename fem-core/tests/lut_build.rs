@@ -2,7 +2,7 @@
 //! and merge reproduce a single-process build bit for bit, the file format round-trips, and
 //! damaged, edited or foreign files are rejected with errors naming the file.
 
-// Test helpers outside #[test] functions may unwrap too (COMMON.md: tests may unwrap).
+// Test helpers outside #[test] functions may unwrap too (clippy.toml allows it only inside them).
 #![allow(clippy::unwrap_used)]
 
 mod lut_common;

@@ -3,7 +3,7 @@
 //! a = C' E2^(-1/3), linear in p_air, and sqrt(0.2 mm + u_s) along u_s, so the table's
 //! interpolant can be compared with the closed form everywhere, not only at nodes.
 
-// Test helpers outside #[test] functions may unwrap too (COMMON.md: tests may unwrap).
+// Test helpers outside #[test] functions may unwrap too (clippy.toml allows it only inside them).
 #![allow(clippy::unwrap_used)]
 
 mod lut_common;

@@ -1,10 +1,10 @@
 //! The shipped default table, fem-core/data/default.lut: it verifies (format version and
-//! content hash), covers the axes the issue requires, and — the slow `#[ignore]` test —
+//! content hash), covers the default grid's axes, and — the slow `#[ignore]` test —
 //! regenerating a sample of its curves with the recorded parameters, mesh level and solver
 //! settings reproduces the stored numbers. Run the slow test with
 //! `cargo test -p fem-core --release --test lut_shipped -- --ignored`.
 
-// Test helpers outside #[test] functions may unwrap too (COMMON.md: tests may unwrap).
+// Test helpers outside #[test] functions may unwrap too (clippy.toml allows it only inside them).
 #![allow(clippy::unwrap_used)]
 
 use fem_core::lut::{

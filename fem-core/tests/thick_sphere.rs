@@ -98,7 +98,7 @@ fn lame_thick_sphere_small_strain() {
         ui * 1e3,
         uo * 1e3
     );
-    // issue tolerance 0.5 %
+    // accepted error 0.5 %
     assert!((ui / lame(a) - 1.0).abs() < 5e-3, "inner {ui}");
     assert!((uo / lame(b) - 1.0).abs() < 5e-3, "outer {uo}");
 }
@@ -106,7 +106,7 @@ fn lame_thick_sphere_small_strain() {
 #[test]
 fn incompressible_neo_hookean_sphere_inflation() {
     // Exact incompressible neo-Hookean thick sphere (mu = E/3): inner-radius displacement
-    // 42.134 um at 6 kPa, 111.570 um at 15 kPa, 505.189 um at 50 kPa (issue 4), checked to
+    // 42.134 um at 6 kPa, 111.570 um at 15 kPa, 505.189 um at 50 kPa, checked to
     // 1 % with nu = 0.4999 (bulk/shear ratio 1.7e3).
     for (p, exact_um, steps) in [(6.0, 42.134, 1), (15.0, 111.570, 2), (50.0, 505.189, 5)] {
         let (ui, _) = inflate_sphere(
@@ -264,7 +264,7 @@ fn yeoh_sphere_inflation_mm(mu: f64, beta: f64, p_kpa: f64) -> f64 {
 
 #[test]
 fn strain_stiffening_sphere_inflation_matches_the_exact_incompressible_yeoh_solution() {
-    // beta = 0 reproduces the issue's neo-Hookean reference numbers (checks the quadrature)
+    // beta = 0 reproduces the neo-Hookean reference numbers above (checks the quadrature)
     let mu = 2300.0 / 3.0;
     let du0 = yeoh_sphere_inflation_mm(mu, 0.0, 50.0);
     assert!((du0 * 1e3 / 505.189 - 1.0).abs() < 1e-4, "{du0}");

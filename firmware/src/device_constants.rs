@@ -1,5 +1,5 @@
 //! The bench build's conversion constants, reported to the host in
-//! [`protocol::DeviceInfo`] so it can convert raw counts (DESIGN.md section 4).
+//! [`protocol::DeviceInfo`] so it can convert raw counts (docs/hardware.md).
 //!
 //! - **ADC** (RP2040, 12-bit SAR, 3.3 V reference = the analog supply): every tick the board
 //!   layer sums 16 conversions per channel ([`crate::sampling::Oversampler`]), giving 16-bit

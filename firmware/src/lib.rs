@@ -1,4 +1,4 @@
-//! The sensor controller's logic (DESIGN.md section 3): hardware-independent, `no_std`,
+//! The sensor controller's logic (docs/firmware.md): hardware-independent, `no_std`,
 //! no allocation, no embassy, no pins.
 //!
 //! Everything is a synchronous state machine driven by time and raw inputs:

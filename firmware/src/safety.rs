@@ -1,4 +1,4 @@
-//! Safety supervisor (DESIGN.md section 3). Checked on every tick, before the pressure
+//! Safety supervisor. Checked on every tick, before the pressure
 //! controller runs, so its actions apply to the outputs of the same tick:
 //!
 //! | fault              | cause (checked every tick)                              | action                              | cause gone (for `ClearFault`)     |

@@ -3,8 +3,8 @@
 //! sudden volume change caused by indenting the shell.
 //!
 //! Acceptance, and why:
-//! - settling band ±2 % of the setpoint: hil-sim's acceptance (issue 5) holds the pressure
-//!   within 2 % while indenting, and the FE model's pressure grid is read at that precision;
+//! - settling band ±2 % of the setpoint: hil-sim's bench tests hold the pressure within 2 %
+//!   while indenting, and the FE model's pressure grid is read at that precision;
 //! - settling time <= 0.5 s from the command: the host waits for the pressure before an
 //!   indentation that itself lasts ~1.7 s; the default gains settle in 0.11 s (6 kPa) and
 //!   0.22 s (15 kPa) on this plant, so 0.5 s leaves a 2x margin for model changes while a

@@ -1,4 +1,4 @@
-//! Every safety trip of the supervisor (DESIGN.md section 3), its latching, its single report
+//! Every safety trip of the supervisor (`firmware::safety`), its latching, its single report
 //! and its clearing.
 
 mod support;

@@ -1,5 +1,5 @@
 //! Hidden effects: departures of the simulated bench from the baseline model that are in
-//! the ground truth but never announced on the wire (DESIGN.md section 8). The host's
+//! the ground truth but never announced on the wire (docs/diagnosis.md). The host's
 //! diagnosis must find them from the data.
 //!
 //! Physical effects computed by fem-core travel in the sample's curve parameters (finite

@@ -1,4 +1,4 @@
-//! hil-sim: the emulated bench (DESIGN.md section 6).
+//! hil-sim: the emulated bench (docs/measurement.md).
 //!
 //! Plant models, one concept each: [`pneumatics`] (isothermal gas, pump, leak, vent),
 //! [`mechanics`] (stage travel and the contact from fem-core curves or a rigid sample),

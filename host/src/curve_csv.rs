@@ -1,4 +1,4 @@
-//! The measured-curve CSV (DESIGN.md section 7), the interchange format every command reads
+//! The measured-curve CSV, the interchange format every command reads
 //! and writes: the single reader and writer of it.
 //!
 //! ```text

@@ -5,7 +5,7 @@
 //! calibration's parabola in u_s is known exactly: A, B - 2 A d, A d^2 - B d + C with d the
 //! apex inflation at the calibration pressure.
 
-#![allow(clippy::unwrap_used)] // tests may unwrap (COMMON.md)
+#![allow(clippy::unwrap_used)] // tests may unwrap: a panic fails the test with its message
 
 use hil_sim::bench::{BenchOptions, start};
 use hil_sim::mechanics_source::solve_curves;
@@ -84,7 +84,7 @@ fn calibrate_manometer_load_and_proximity_over_a_pty() {
     assert!(ok, "{out}{err}");
     drop(bench);
     let record: CalibrationRecord = serde_json::from_str(out.trim()).unwrap();
-    // every calibration of this session is in the newest record on disk
+    // every calibration of this run is in the newest record on disk
     let (_, latest) = host::calibration::load_latest(&dir).unwrap();
     assert_eq!(latest, record);
     // The manometer's zero: hil-sim's sensor has no offset by default; its noise is

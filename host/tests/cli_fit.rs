@@ -1,7 +1,7 @@
 //! `tactile fit` as a user runs it: JSON keys, and bad input -> exit code 2 with the file,
 //! line and column named.
 
-#![allow(clippy::unwrap_used)] // tests may unwrap (COMMON.md)
+#![allow(clippy::unwrap_used)] // tests may unwrap: a panic fails the test with its message
 
 use std::path::PathBuf;
 use std::process::Command;

@@ -9,7 +9,7 @@
 //!   at off-grid moduli, the ground truth the fit tests recover (so the LUT's interpolation
 //!   bias is part of what they measure).
 
-#![allow(clippy::unwrap_used)] // tests may unwrap (COMMON.md)
+#![allow(clippy::unwrap_used)] // tests may unwrap: a panic fails the test with its message
 
 use fem_core::lut::grid::log_spaced;
 use fem_core::lut::{LutGrid, build_lut, fem_solver_description, write_lut};

@@ -6,7 +6,7 @@
 //!   the 95 % interval covers the truth at close to its nominal rate;
 //! - joint fits across pressures, the load channel and the pressure recommendation.
 
-#![allow(clippy::unwrap_used)] // tests may unwrap (COMMON.md)
+#![allow(clippy::unwrap_used)] // tests may unwrap: a panic fails the test with its message
 
 use fem_core::lut::{Lut, read_lut};
 use host::curve_csv::read_curve_csv;

@@ -2,7 +2,7 @@
 //! real time: handshake, version check, requests, stream loss counting, clock mapping,
 //! unplug.
 
-#![allow(clippy::unwrap_used)] // tests may unwrap (COMMON.md)
+#![allow(clippy::unwrap_used)] // tests may unwrap: a panic fails the test with its message
 
 use host::link::loopback::{LoopbackDevice, LoopbackFaults, SimpleBench};
 use host::link::{Link, LinkConfig, LinkError};

@@ -1,6 +1,6 @@
 //! `tactile flash FIRMWARE.elf --uf2-out FILE`: the UF2 written for a minimal ELF.
 
-#![allow(clippy::unwrap_used)] // tests may unwrap (COMMON.md)
+#![allow(clippy::unwrap_used)] // tests may unwrap: a panic fails the test with its message
 
 use host::usb::uf2::{crc32_mpeg2, parse_uf2};
 use std::process::Command;

@@ -4,7 +4,7 @@
 //! access and XIP exit before erase/write, 4096-byte erase and 256-byte write alignment,
 //! and NOR flash semantics (a write can only clear bits, so an unerased page corrupts).
 
-#![allow(clippy::unwrap_used)] // tests may unwrap (COMMON.md)
+#![allow(clippy::unwrap_used)] // tests may unwrap: a panic fails the test with its message
 
 use host::usb::elf_image::LoadSegment;
 use host::usb::picoboot::{

@@ -2,7 +2,7 @@
 //! (github.com/microsoft/uf2, README "File format"), with the offsets and magic numbers
 //! written out here independently of the implementation's constants.
 
-#![allow(clippy::unwrap_used)] // tests may unwrap (COMMON.md)
+#![allow(clippy::unwrap_used)] // tests may unwrap: a panic fails the test with its message
 
 use host::usb::elf_image::{ElfError, LoadSegment, load_segments};
 use host::usb::uf2::{FlashImage, Uf2Error, crc32_mpeg2, parse_uf2};

@@ -1,6 +1,6 @@
 //! `tactile radius`, `tactile devices` and `tactile flash --uf2-out` as a user runs them.
 
-#![allow(clippy::unwrap_used)] // tests may unwrap (COMMON.md)
+#![allow(clippy::unwrap_used)] // tests may unwrap: a panic fails the test with its message
 
 use host::camera::{encode_gray_jpeg, write_pgm, write_png};
 use host::vision::{SyntheticDisc, SyntheticScene};

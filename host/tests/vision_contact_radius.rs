@@ -1,9 +1,9 @@
 //! Accuracy of the contact radius on synthetic frames whose true radius is exact (see
-//! `host::vision::synthetic_frame`). Targets from issue 7: radius error <= 0.1 px RMS over
+//! `host::vision::synthetic_frame`). Targets: radius error <= 0.1 px RMS over
 //! blur sigma 1.5-2.5 px, noise 2-6 grey levels, contrast 20-80 grey levels (either
 //! polarity) with vignetting, a gradient and the mirror, and no bias trend with contrast.
 
-#![allow(clippy::unwrap_used)] // tests may unwrap (COMMON.md)
+#![allow(clippy::unwrap_used)] // tests may unwrap: a panic fails the test with its message
 
 use host::vision::{ContactRadiusConfig, SeededRng, SyntheticDisc, SyntheticScene, contact_radius};
 

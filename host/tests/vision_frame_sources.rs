@@ -1,7 +1,7 @@
 //! Frame sources: PGM/PNG files and directories, MJPEG stream files, the in-memory channel,
 //! the V4L2 pieces that can be tested without a camera, and the luma conversions.
 
-#![allow(clippy::unwrap_used)] // tests may unwrap (COMMON.md)
+#![allow(clippy::unwrap_used)] // tests may unwrap: a panic fails the test with its message
 
 use host::camera::host_clock::{map_clock_us, monotonic_to_host_us};
 use host::camera::image_file::decode_gray_image;

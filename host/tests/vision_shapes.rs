@@ -1,7 +1,7 @@
 //! Contact detection and shape: no-contact frames, tilt (ellipse), a changed mirror,
 //! a disc cut by the image border, the predicted radius error, and the px/mm calibration.
 
-#![allow(clippy::unwrap_used)] // tests may unwrap (COMMON.md)
+#![allow(clippy::unwrap_used)] // tests may unwrap: a panic fails the test with its message
 
 use host::vision::{
     ContactRadiusConfig, ContactRadiusEstimator, PxPerMmCalibration, SyntheticDisc, SyntheticScene,

@@ -1,4 +1,4 @@
-//! The wire protocol between the sensor controller and the host (DESIGN.md section 4),
+//! The wire protocol between the sensor controller and the host (docs/protocol.md),
 //! shared verbatim by the firmware, hil-sim and the host. `no_std`, no allocation.
 //!
 //! - [`messages`]: the two message enums ([`RequestFrame`]/[`Request`] host -> device,

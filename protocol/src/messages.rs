@@ -1,4 +1,4 @@
-//! Every message on the wire (DESIGN.md section 4): host -> device requests and
+//! Every message on the wire: host -> device requests and
 //! device -> host messages.
 //!
 //! Physical quantities that the host chooses (setpoints, gains) travel as `f32` in the

@@ -1,7 +1,7 @@
 //! The `tactile watch` dashboard renders a known state correctly (ratatui's test backend):
 //! the state is built from live-feed events exactly as the client receives them.
 
-#![allow(clippy::unwrap_used)] // tests may unwrap (COMMON.md)
+#![allow(clippy::unwrap_used)] // tests may unwrap: a panic fails the test with its message
 
 use host::daemon::api::{Event, FitSummary, Job, JobKind, JobState};
 use host::dashboard::{DashboardState, render_to_text};

@@ -4,7 +4,7 @@
 //! JSON error naming the field), and none of them changes anything on the device or in the
 //! queue. A valid request afterwards works (the checks are not simply refusing all).
 
-#![allow(clippy::unwrap_used)] // tests may unwrap (COMMON.md)
+#![allow(clippy::unwrap_used)] // tests may unwrap: a panic fails the test with its message
 
 use std::io::{Read, Write};
 use std::time::{Duration, Instant};

@@ -7,7 +7,7 @@
 //!
 //! `cargo test -p system-tests --release --test demo_bias_stages -- --ignored --nocapture`
 
-#![allow(clippy::unwrap_used)] // tests may unwrap (COMMON.md)
+#![allow(clippy::unwrap_used)] // tests may unwrap: a panic fails the test with its message
 
 use fem_core::lut::read_lut;
 use hil_sim::mechanics::{CurveMechanics, MechanicsModel};

@@ -9,7 +9,7 @@
 //! during the rigid sweep in both of two runs; one at a time, once in ~15 runs (with a
 //! benchmark compiling alongside). Which fault is now named in the error.
 
-#![allow(clippy::unwrap_used)] // tests may unwrap (COMMON.md)
+#![allow(clippy::unwrap_used)] // tests may unwrap: a panic fails the test with its message
 
 use host::experiment::simulated::{DemoError, DemoOptions, demo_scenario, run_demo_with};
 use std::path::PathBuf;
@@ -34,7 +34,7 @@ fn options(name: &str, modulus: f64, repeats: u32) -> DemoOptions {
     }
 }
 
-/// The acceptance criterion: within 2 % with the 95 % interval covering the truth,
+/// The demo's acceptance criterion: within 2 % with the 95 % interval covering the truth,
 /// at off-grid moduli between 20 and 400 kPa (the fit table's nodes are 6 per decade:
 /// ..., 21.5, 31.6, 46.4, 68.1, 100, 146.8, 215.4, 316.2, 464.2, ...), each measured at a
 /// pressure where a responds to E2 (6 kPa for soft, 15 kPa for the stiff one). The truth

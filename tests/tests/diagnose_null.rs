@@ -6,7 +6,7 @@
 //! `cargo test --release -p system-tests --test diagnose_null -- --ignored --nocapture`
 //! (measured 1 of 100 with the load channel and the errors-in-variables correction, 2 of 100 before, once the
 //! noise model's table-error term followed the load steps; it was 28 of 100 with a smooth
-//! table-error term: README, Diagnosis).
+//! table-error term: docs/diagnosis.md).
 //! `NULL_SEEDS=N` runs the long check on fewer seeds (it then reports and fails, since the
 //! criterion needs >= 100); `NULL_MODULUS_KPA=E` at another true modulus (default 170);
 //! `NULL_WITHOUT_LOADS=1` drops the loads (the selection then reads the radius alone).

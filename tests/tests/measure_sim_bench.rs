@@ -5,7 +5,7 @@
 //!
 //! `cargo test -p system-tests --release --test measure_sim_bench -- --ignored --nocapture`
 
-#![allow(clippy::unwrap_used)] // tests may unwrap (COMMON.md)
+#![allow(clippy::unwrap_used)] // tests may unwrap: a panic fails the test with its message
 
 use std::time::Duration;
 

@@ -1,5 +1,5 @@
 //! The bench board's pinout (Raspberry Pi Pico). `main` takes the pins in this order; the
-//! README's pinout table is this list.
+//! pinout table of docs/hardware.md is this list.
 //!
 //! | GPIO | function                          | peripheral / notes                                     |
 //! |------|-----------------------------------|--------------------------------------------------------|

@@ -1,6 +1,6 @@
 //! RP2040 board layer of the video-tactile sensor controller.
 //!
-//! A thin shell around the `firmware` library (DESIGN.md section 3): it samples the
+//! A thin shell around the `firmware` library (see docs/firmware.md): it samples the
 //! peripherals, calls `Controller::tick` every 500 µs and `Controller::handle` for every
 //! request from USB, and applies the outputs. Pinout: see [`board`].
 //!

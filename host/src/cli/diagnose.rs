@@ -1,6 +1,6 @@
 //! `tactile diagnose CURVE.csv... [--json] [--out DIR] [--lut FILE] [--effects FILE]...`:
 //! where the baseline model and the measurement disagree, which candidate effect explains it,
-//! and the gap before and after adding it (README "Diagnosis", DESIGN.md section 8).
+//! and the gap before and after adding it (docs/diagnosis.md).
 //!
 //! Also: `--build-tables DIR` builds the effect tables with fem-core; `--simulate
 //! EFFECT=SIZE --out DIR` writes hidden-effect curves from hil-sim (`none` for clean data);

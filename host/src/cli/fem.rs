@@ -1,5 +1,5 @@
 //! `tactile fem curve`: simulate one indentation (fem-core) and write it as a measured-curve
-//! CSV (DESIGN.md section 7) with the extra columns `h_mm` and `volume_mm3`, and every model
+//! CSV (`host::curve_csv`) with the extra columns `h_mm` and `volume_mm3`, and every model
 //! parameter as `# key: value` metadata.
 
 use clap::{Args, Subcommand, ValueEnum};

@@ -1,4 +1,4 @@
-//! The bench daemon (`tactile daemon`, DESIGN.md section 7): one long-lived process owns
+//! The bench daemon (`tactile daemon`, docs/daemon-api.md): one long-lived process owns
 //! the device link and the frame source, keeps the heartbeats going, reconnects by USB
 //! serial number when the controller is unplugged and plugged back (recording the gap),
 //! runs queued experiments one at a time and writes their records, and serves a local HTTP

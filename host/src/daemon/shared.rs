@@ -32,7 +32,7 @@ pub enum Command {
 #[derive(Debug, Default)]
 pub struct State {
     pub status: StatusReport,
-    /// Every job of this session, oldest first.
+    /// Every job since the daemon started, oldest first.
     pub jobs: Vec<Job>,
     next_id: u64,
     /// A running job to cancel.

@@ -1,4 +1,4 @@
-//! Diagnosis (DESIGN.md section 8, issue 8): find where the baseline model and a measurement
+//! Diagnosis (docs/diagnosis.md): find where the baseline model and a measurement
 //! disagree, name the missing effect from a library of candidates, add it and show the gap
 //! shrink. It decides from the data alone.
 //!

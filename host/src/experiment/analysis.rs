@@ -1,4 +1,4 @@
-//! After the indentations: the record's `curve.csv` (DESIGN.md section 7), the fit against
+//! After the indentations: the record's `curve.csv` (`crate::curve_csv`), the fit against
 //! the table (`fit.json`) and the plots, shared by `tactile measure` and `tactile demo`.
 
 use std::path::Path;

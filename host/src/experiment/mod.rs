@@ -1,4 +1,4 @@
-//! Experiments (DESIGN.md section 7): settle the pressure, tare, indent and retract with the
+//! Experiments: settle the pressure, tare, indent and retract with the
 //! stage while streaming, pair every camera frame's contact radius with u_s interpolated at
 //! the frame's time, split load and unload, repeat.
 //!

@@ -403,8 +403,8 @@ impl DemoError {
     }
 }
 
-/// The fit fixture table (fem-core at mesh level -2): the only table in the repository
-/// until a production table is shipped.
+/// The fit fixture table (fem-core at [`DEMO_MESH_LEVEL`], the settings of the simulated
+/// sample): the demo's default fit table.
 pub fn fixture_lut_path() -> std::path::PathBuf {
     std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/fit_fixture.lut")
 }
@@ -557,8 +557,8 @@ pub fn run_demo_with(scenario: Scenario, options: &DemoOptions) -> Result<DemoRe
     link.request(Request::SetPressure {
         setpoint_kpa: (pressure + manometer_zero) as f32,
     })?;
-    // the pressure settles within ~0.2 s (README, firmware tests); the reference is the
-    // inflated, untouched shell
+    // the pressure settles within ~0.2 s (firmware's pressure_regulation tests); the
+    // reference is the inflated, untouched shell
     let reference = reference_frame(&mut link, &bench, Duration::from_millis(700))?;
     let px_per_mm = px.px_per_mm;
     let mut source = SimRadiusSource::new(&bench, &scenario_clock, reference, px)?;

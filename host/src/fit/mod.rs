@@ -1,4 +1,4 @@
-//! The modulus fit (DESIGN.md sections 1 and 7): the sample's Young's modulus E2 is the
+//! The modulus fit (docs/measurement.md): the sample's Young's modulus E2 is the
 //! value whose finite-element a–u_s curve, interpolated continuously from the fem-core
 //! lookup table, fits the measured points best in least squares.
 //!

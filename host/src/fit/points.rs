@@ -1,4 +1,4 @@
-//! Measured points as the fit sees them, from the curve CSV (DESIGN.md section 7).
+//! Measured points as the fit sees them, from the curve CSV (`crate::curve_csv`).
 
 use crate::curve_csv::{CurveCsv, Phase};
 

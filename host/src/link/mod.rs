@@ -1,4 +1,4 @@
-//! The typed client of the device protocol (DESIGN.md section 4):
+//! The typed client of the device protocol (docs/protocol.md):
 //!
 //! - [`transport`]: the byte pipe ([`Transport`]): a serial port ([`SerialTransport`]) or an
 //!   in-process device ([`loopback`]);
