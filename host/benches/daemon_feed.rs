@@ -20,9 +20,9 @@
 use std::collections::HashMap;
 use std::time::{Duration, Instant};
 
-use host::daemon::Client;
-use host::daemon::api::{Event, ExperimentRequest};
-use host::daemon::sim::start_sim_daemon;
+use daemon::Client;
+use daemon::api::{Event, ExperimentRequest};
+use daemon::sim::start_sim_daemon;
 
 fn ticks_per_s() -> f64 {
     // USER_HZ is 100 on every Linux configuration Rust supports.
@@ -94,11 +94,10 @@ fn main() {
         .unwrap_or(10.0);
     let dir = std::env::temp_dir().join(format!("tactile-daemon-bench-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
-    let lut = host::daemon::sim::sim_lut();
-    let scenario = host::daemon::jobs::default_sim_scenario(&lut);
+    let lut = daemon::sim::sim_lut();
+    let scenario = daemon::jobs::default_sim_scenario(&lut);
     eprintln!("calibrating (simulated rigid sample)...");
-    host::daemon::jobs::calibrate_sim(&scenario, &dir.join("records/calibrations"))
-        .expect("calibration");
+    daemon::jobs::calibrate_sim(&scenario, &dir.join("records/calibrations")).expect("calibration");
     let daemon = start_sim_daemon(
         Some(scenario.clone()),
         "127.0.0.1:0".parse().expect("addr"),
@@ -151,7 +150,7 @@ fn main() {
             } = e
             {
                 // The daemon's own path: transport read -> client (same process clock).
-                let now_us = host::daemon::api::unix_us();
+                let now_us = daemon::api::unix_us();
                 daemon_ms.push(now_us.saturating_sub(received_unix_us) as f64 * 1e-3);
                 raw += u64::from(n);
                 if let Some(epoch) = probe.epoch() {

@@ -5,10 +5,10 @@
 //! measurement.
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use host::diagnosis::candidates::EffectKind;
-use host::diagnosis::simulate::{Hidden, SimSpec, simulate};
-use host::diagnosis::tables::shipped_tables;
-use host::diagnosis::{DiagnoseOptions, diagnose};
+use diagnosis::candidates::EffectKind;
+use diagnosis::simulate::{Hidden, SimSpec, simulate};
+use diagnosis::tables::shipped_tables;
+use diagnosis::{DiagnoseOptions, diagnose};
 use std::hint::black_box;
 use std::time::Duration;
 

@@ -4,7 +4,7 @@
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use fem_core::lut::read_lut;
-use host::fit::{FitOptions, FitPoint, LutModel, fit_modulus};
+use fit::{FitOptions, FitPoint, LutModel, fit_modulus};
 use std::hint::black_box;
 use std::path::PathBuf;
 

@@ -3,10 +3,10 @@
 //! frame is that frame encoded as a baseline greyscale JPEG at quality 85 (about what a
 //! UVC camera streams). `cargo bench -p host --bench vision_radius`.
 
+use camera::{Frame, PixelFormat, encode_gray_jpeg};
 use criterion::{Criterion, criterion_group, criterion_main};
-use host::camera::{Frame, PixelFormat, encode_gray_jpeg};
-use host::vision::{ContactRadiusConfig, ContactRadiusEstimator, SyntheticDisc, SyntheticScene};
 use std::hint::black_box;
+use vision::{ContactRadiusConfig, ContactRadiusEstimator, SyntheticDisc, SyntheticScene};
 
 fn bench_radius(c: &mut Criterion) {
     for radius in [60.0, 100.0, 170.0] {

@@ -11,8 +11,8 @@
 
 use hil_sim::camera::{CameraConfig, CameraRenderer, FrameScene};
 use hil_sim::rng::SimRng;
-use host::camera::GrayImage;
-use host::vision::{ContactRadiusConfig, ContactRadiusEstimator};
+use vision::GrayImage;
+use vision::{ContactRadiusConfig, ContactRadiusEstimator};
 
 #[derive(Default, Clone, Copy)]
 struct Bin {

@@ -9,13 +9,13 @@
 //! `OUT_DIR/ours.csv` (`index,radius_px,time_us`), timing reference preparation plus
 //! measurement per frame on one thread.
 
-use host::camera::write_pgm;
-use host::vision::{
-    ContactRadiusConfig, ContactRadiusEstimator, SeededRng, SyntheticDisc, SyntheticScene,
-};
+use camera::write_pgm;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::time::Instant;
+use vision::{
+    ContactRadiusConfig, ContactRadiusEstimator, SeededRng, SyntheticDisc, SyntheticScene,
+};
 
 fn main() -> anyhow::Result<()> {
     let mut args = std::env::args().skip(1);

@@ -3,10 +3,10 @@
 //! cost can be read even on a loaded machine where criterion's wall-clock numbers include
 //! waiting for a CPU: `cargo run --release -p host --example vision_timing [N]`.
 
-use host::camera::{Frame, PixelFormat, encode_gray_jpeg};
-use host::vision::{ContactRadiusConfig, ContactRadiusEstimator, SyntheticDisc, SyntheticScene};
+use camera::{Frame, PixelFormat, encode_gray_jpeg};
 use std::hint::black_box;
 use std::time::Instant;
+use vision::{ContactRadiusConfig, ContactRadiusEstimator, SyntheticDisc, SyntheticScene};
 
 /// Nanoseconds this thread has spent on a CPU.
 fn thread_cpu_ns() -> Option<u64> {

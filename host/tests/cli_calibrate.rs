@@ -7,10 +7,10 @@
 
 #![allow(clippy::unwrap_used)] // tests may unwrap: a panic fails the test with its message
 
+use experiment::calibration::CalibrationRecord;
 use hil_sim::bench::{BenchOptions, start};
 use hil_sim::mechanics_source::solve_curves;
 use hil_sim::scenario::{MechanicsSource, Scenario};
-use host::calibration::CalibrationRecord;
 use std::process::Command;
 
 fn rigid_bench_scenario() -> Scenario {
@@ -19,7 +19,7 @@ fn rigid_bench_scenario() -> Scenario {
         seed: 11,
         ..Scenario::default()
     };
-    s.sample.modulus_kpa = host::calibration::RIGID_MODULUS_KPA;
+    s.sample.modulus_kpa = experiment::calibration::RIGID_MODULUS_KPA;
     s.mechanics = MechanicsSource::Solve {
         pressures_kpa: vec![6.0],
         modulus_factors: vec![1.0],
@@ -85,7 +85,7 @@ fn calibrate_manometer_load_and_proximity_over_a_pty() {
     drop(bench);
     let record: CalibrationRecord = serde_json::from_str(out.trim()).unwrap();
     // every calibration of this run is in the newest record on disk
-    let (_, latest) = host::calibration::load_latest(&dir).unwrap();
+    let (_, latest) = experiment::calibration::load_latest(&dir).unwrap();
     assert_eq!(latest, record);
     // The manometer's zero: hil-sim's sensor has no offset by default; its noise is
     // 0.02 kPa rms, averaged over ~1000 samples, and the 16-bit count is 0.001 kPa.

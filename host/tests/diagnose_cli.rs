@@ -6,10 +6,10 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use host::diagnosis::candidates::{Candidate, EffectKind};
-use host::diagnosis::model::Model;
-use host::diagnosis::synthetic::{SyntheticSpec, generate};
-use host::diagnosis::tables::shipped_tables;
+use diagnosis::candidates::{Candidate, EffectKind};
+use diagnosis::model::Model;
+use diagnosis::synthetic::{SyntheticSpec, generate};
+use diagnosis::tables::shipped_tables;
 
 fn tactile() -> Command {
     Command::new(env!("CARGO_BIN_EXE_tactile"))
@@ -49,7 +49,7 @@ fn write_curves(
         ..SyntheticSpec::default()
     };
     let points = generate(&model, truth, extra, &spec);
-    let text = host::diagnosis::simulate::to_curve_csv(&points, "diagnose_cli test").expect("csv");
+    let text = diagnosis::simulate::to_curve_csv(&points, "diagnose_cli test").expect("csv");
     std::fs::write(path, text).expect("write csv");
 }
 

@@ -14,7 +14,7 @@
 use fem_core::lut::grid::log_spaced;
 use fem_core::lut::{LutGrid, build_lut, fem_solver_description, write_lut};
 use fem_core::{CurveParams, solve_curve};
-use host::curve_csv::{CurveCsv, CurveRow, write_curve_csv};
+use fit::curve_csv::{CurveCsv, CurveRow, write_curve_csv};
 use std::path::PathBuf;
 
 pub const MESH_LEVEL: i32 = -1;

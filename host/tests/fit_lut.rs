@@ -9,10 +9,8 @@
 #![allow(clippy::unwrap_used)] // tests may unwrap: a panic fails the test with its message
 
 use fem_core::lut::{Lut, read_lut};
-use host::curve_csv::read_curve_csv;
-use host::fit::{
-    FitOptions, FitPoint, LutModel, fit_modulus, points_from_curve_csv, recommend_pressure,
-};
+use fit::curve_csv::read_curve_csv;
+use fit::{FitOptions, FitPoint, LutModel, fit_modulus, points_from_curve_csv, recommend_pressure};
 use std::path::PathBuf;
 
 fn data(name: &str) -> PathBuf {
@@ -184,7 +182,7 @@ fn joint_fit_across_pressures_and_the_load_channel() {
         (with_load.modulus_kpa / e - 1.0).abs() < 0.03,
         "{with_load:?}"
     );
-    let w = |f: &host::fit::ModulusFit| f.ci95_kpa[1] - f.ci95_kpa[0];
+    let w = |f: &fit::ModulusFit| f.ci95_kpa[1] - f.ci95_kpa[0];
     assert!(
         w(&with_load) <= w(&fit) * 1.05,
         "{} vs {}",

@@ -187,7 +187,7 @@ fn measure_without_a_calibration_folder_says_what_to_run() {
 
 #[test]
 fn a_damaged_newest_calibration_is_skipped_and_named() {
-    use host::calibration::{CalibrationRecord, CalibrationStoreError, load_latest};
+    use experiment::calibration::{CalibrationRecord, CalibrationStoreError, load_latest};
     let dir = scratch("calibration-store");
     let valid =
         serde_json::to_string(&CalibrationRecord::new("E6614C311B4A2C2D", "1.0.0")).unwrap();
@@ -233,7 +233,7 @@ fn a_measurement_that_fails_after_connecting_leaves_no_empty_record_folder() {
     // A record without the proximity calibration the measurement needs: the controller
     // answers, then the run stops before anything is recorded.
     let calibration = dir.join("calibration-1000.json");
-    let record = host::calibration::CalibrationRecord::new("SIM-0000000000000003", "0.1.0");
+    let record = experiment::calibration::CalibrationRecord::new("SIM-0000000000000003", "0.1.0");
     std::fs::write(&calibration, serde_json::to_string(&record).unwrap()).unwrap();
     let out = tactile()
         .arg("measure")

@@ -2,8 +2,8 @@
 
 #![allow(clippy::unwrap_used)] // tests may unwrap: a panic fails the test with its message
 
-use host::usb::uf2::{crc32_mpeg2, parse_uf2};
 use std::process::Command;
+use usb::uf2::{crc32_mpeg2, parse_uf2};
 
 /// ELF32 LE ARM with one PT_LOAD of `data` at physical address `paddr`.
 fn one_segment_elf(paddr: u32, data: &[u8]) -> Vec<u8> {

@@ -2,9 +2,9 @@
 
 #![allow(clippy::unwrap_used)] // tests may unwrap: a panic fails the test with its message
 
-use host::camera::{encode_gray_jpeg, write_pgm, write_png};
-use host::vision::{SyntheticDisc, SyntheticScene};
+use camera::{encode_gray_jpeg, write_pgm, write_png};
 use std::process::Command;
+use vision::{SyntheticDisc, SyntheticScene};
 
 fn tactile() -> Command {
     Command::new(env!("CARGO_BIN_EXE_tactile"))

@@ -3,8 +3,8 @@
 
 #![allow(clippy::unwrap_used)] // tests may unwrap: a panic fails the test with its message
 
-use host::daemon::api::{Event, FitSummary, Job, JobKind, JobState};
-use host::dashboard::{DashboardState, render_to_text};
+use daemon::api::{Event, FitSummary, Job, JobKind, JobState};
+use daemon::terminal_view::{DashboardState, render_to_text};
 
 fn known_state() -> DashboardState {
     let mut s = DashboardState::default();

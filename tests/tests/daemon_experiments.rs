@@ -16,9 +16,9 @@
 
 use std::time::{Duration, Instant};
 
-use host::daemon::api::{Event, ExperimentRequest, Job, JobState};
-use host::daemon::sim::start_sim_daemon;
-use host::daemon::{Client, DaemonHandle};
+use daemon::api::{Event, ExperimentRequest, Job, JobState};
+use daemon::sim::start_sim_daemon;
+use daemon::{Client, DaemonHandle};
 use protocol::{FrameDecoder, Request, RequestFrame};
 
 fn temp_dir(name: &str) -> std::path::PathBuf {
@@ -56,8 +56,8 @@ fn shared_calibration() -> &'static std::path::Path {
     static DIR: std::sync::OnceLock<std::path::PathBuf> = std::sync::OnceLock::new();
     DIR.get_or_init(|| {
         let dir = temp_dir("daemon-calibration");
-        let scenario = host::daemon::jobs::default_sim_scenario(&host::daemon::sim::sim_lut());
-        host::daemon::jobs::calibrate_sim(&scenario, &dir).unwrap();
+        let scenario = daemon::jobs::default_sim_scenario(&daemon::sim::sim_lut());
+        daemon::jobs::calibrate_sim(&scenario, &dir).unwrap();
         dir
     })
 }
@@ -147,7 +147,7 @@ fn two_clients_watch_while_a_third_runs_an_experiment() {
                             running_fits += 1;
                         }
                     }
-                    Event::Job { job } if job.kind == host::daemon::api::JobKind::Experiment => {
+                    Event::Job { job } if job.kind == daemon::api::JobKind::Experiment => {
                         states.push(job.state);
                         if job.state.is_finished() {
                             break;

@@ -18,9 +18,9 @@ use std::io::{Read, Write};
 use std::net::TcpStream;
 use std::time::{Duration, Instant};
 
-use host::daemon::Client;
-use host::daemon::listener::HEADER_READ_TIMEOUT;
-use host::daemon::sim::start_sim_daemon_capped;
+use daemon::Client;
+use daemon::listener::HEADER_READ_TIMEOUT;
+use daemon::sim::start_sim_daemon_capped;
 
 fn temp_dir(name: &str) -> std::path::PathBuf {
     let d = std::env::temp_dir().join(format!("tactile-{name}-{}", std::process::id()));
@@ -30,7 +30,7 @@ fn temp_dir(name: &str) -> std::path::PathBuf {
 }
 
 struct Daemon {
-    handle: host::daemon::DaemonHandle,
+    handle: daemon::DaemonHandle,
     client: Client,
     dir: std::path::PathBuf,
 }
@@ -117,7 +117,7 @@ fn an_idle_connection_flood_cannot_delay_the_stop() {
 fn an_idle_connection_flood_of_fifteen_thousand_cannot_delay_the_stop() {
     stop_under_flood(
         "daemon-flood-long",
-        host::daemon::listener::MAX_CONNECTIONS,
+        daemon::listener::MAX_CONNECTIONS,
         15_000,
     );
 }

@@ -9,8 +9,8 @@
 use std::io::{Read, Write};
 use std::time::{Duration, Instant};
 
-use host::daemon::Client;
-use host::daemon::sim::start_sim_daemon;
+use daemon::Client;
+use daemon::sim::start_sim_daemon;
 
 /// A refused-body case: path, body, extra headers, expected status.
 type BodyCase<'a> = (&'a str, &'a str, &'a [(&'a str, &'a str)], u16);
@@ -131,7 +131,7 @@ fn refused_requests_change_nothing() {
     for (path, body, headers, want) in cases {
         let r = client.raw("POST", path, Some(body), headers, true).unwrap();
         assert_eq!(r.status, *want, "{path} {body}: {}", r.body);
-        let e: host::daemon::api::ApiError = serde_json::from_str(&r.body)
+        let e: daemon::api::ApiError = serde_json::from_str(&r.body)
             .unwrap_or_else(|e| panic!("{path} {body}: not a JSON error ({e}): {}", r.body));
         assert!(!e.error.is_empty());
     }
@@ -145,7 +145,7 @@ fn refused_requests_change_nothing() {
             true,
         )
         .unwrap();
-    let e: host::daemon::api::ApiError = serde_json::from_str(&r.body).unwrap();
+    let e: daemon::api::ApiError = serde_json::from_str(&r.body).unwrap();
     let fields: Vec<&str> = e.fields.iter().map(|f| f.field.as_str()).collect();
     assert_eq!(fields, ["depth_mm", "repeats"], "{}", r.body);
     // Oversized body.
@@ -199,12 +199,12 @@ fn refused_requests_change_nothing() {
 fn non_loopback_needs_an_explicit_flag() {
     let dir = temp_dir("daemon-remote");
     let bench = hil_sim::bench::start(
-        host::daemon::jobs::default_sim_scenario(&host::daemon::sim::sim_lut()),
+        daemon::jobs::default_sim_scenario(&daemon::sim::sim_lut()),
         hil_sim::bench::BenchOptions::default(),
     )
     .unwrap();
-    let options = host::daemon::DaemonOptions {
-        source: host::daemon::DeviceSource::Sim {
+    let options = daemon::DaemonOptions {
+        source: daemon::DeviceSource::Sim {
             bench,
             scenario: Box::default(),
         },
@@ -212,19 +212,16 @@ fn non_loopback_needs_an_explicit_flag() {
         allow_remote: false,
         token_file: dir.join("token"),
         records_dir: dir.join("records"),
-        lut_path: host::daemon::sim::shipped_lut(),
-        max_connections: host::daemon::listener::MAX_CONNECTIONS,
-        device: host::daemon::DeviceConfig {
+        lut_path: daemon::sim::shipped_lut(),
+        max_connections: daemon::listener::MAX_CONNECTIONS,
+        device: daemon::DeviceConfig {
             idle_stream_hz: 100,
-            link: host::link::LinkConfig::default(),
+            link: link::LinkConfig::default(),
             camera: None,
         },
     };
-    let e = host::daemon::start(options).unwrap_err();
-    assert!(
-        matches!(e, host::daemon::DaemonError::NotLoopback(_)),
-        "{e}"
-    );
+    let e = daemon::start(options).unwrap_err();
+    assert!(matches!(e, daemon::DaemonError::NotLoopback(_)), "{e}");
     assert!(
         !dir.join("token").exists(),
         "nothing created before refusing"

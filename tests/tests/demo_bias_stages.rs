@@ -9,11 +9,11 @@
 
 #![allow(clippy::unwrap_used)] // tests may unwrap: a panic fails the test with its message
 
+use experiment::simulated::{demo_scenario, fixture_lut_path};
 use fem_core::lut::read_lut;
+use fit::{FitOptions, FitPoint, LutModel, fit_modulus};
 use hil_sim::mechanics::{CurveMechanics, MechanicsModel};
 use hil_sim::mechanics_source::solve_curves;
-use host::experiment::simulated::{demo_scenario, fixture_lut_path};
-use host::fit::{FitOptions, FitPoint, LutModel, fit_modulus};
 
 fn fit(model: &LutModel, pts: &[(f64, f64)], p: f64) -> f64 {
     let points: Vec<FitPoint> = pts

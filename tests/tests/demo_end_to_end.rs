@@ -11,7 +11,7 @@
 
 #![allow(clippy::unwrap_used)] // tests may unwrap: a panic fails the test with its message
 
-use host::experiment::simulated::{DemoError, DemoOptions, demo_scenario, run_demo_with};
+use experiment::simulated::{DemoError, DemoOptions, demo_scenario, run_demo_with};
 use std::path::PathBuf;
 
 fn out_dir(name: &str) -> PathBuf {

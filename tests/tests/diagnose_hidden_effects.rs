@@ -1,6 +1,6 @@
 //! Diagnosis on hidden-effect data from hil-sim (the effect is switched on only in the
 //! simulated truth: fem-core solves at the true sample, hil-sim's effect code, correlated
-//! noise; see `host::diagnosis::simulate`), at off-grid moduli (170 kPa; 40 kPa for strain
+//! noise; see `diagnosis::simulate`), at off-grid moduli (170 kPa; 40 kPa for strain
 //! stiffening, which only soft samples show). For each effect at its "clear" size the workflow must name it
 //! (or an ambiguity group containing it) and the augmented model must shrink the gap
 //! (chi^2 per dof) by more than 10 %.
@@ -9,15 +9,12 @@
 //! measurement effect); every effect runs with
 //! `cargo test --release -p system-tests --test diagnose_hidden_effects -- --ignored`.
 
-use host::diagnosis::candidates::EffectKind;
-use host::diagnosis::simulate::{Hidden, SimSpec, simulate, sizes, truth_modulus_kpa};
-use host::diagnosis::tables::shipped_tables;
-use host::diagnosis::{DiagnoseOptions, diagnose};
+use diagnosis::candidates::EffectKind;
+use diagnosis::simulate::{Hidden, SimSpec, simulate, sizes, truth_modulus_kpa};
+use diagnosis::tables::shipped_tables;
+use diagnosis::{DiagnoseOptions, diagnose};
 
-fn tables() -> (
-    fem_core::lut::Lut,
-    Vec<host::diagnosis::tables::EffectTable>,
-) {
+fn tables() -> (fem_core::lut::Lut, Vec<diagnosis::tables::EffectTable>) {
     shipped_tables().expect("diagnosis test setup")
 }
 
@@ -47,7 +44,7 @@ fn check(kind: EffectKind, seed: u64) {
         d.verdict,
         d.effect,
         d.ambiguity_group,
-        host::diagnosis::report::text(&d)
+        diagnosis::report::text(&d)
     );
     // the gap must shrink, beyond chance: the chi^2 improvement exceeds the bootstrap
     // threshold (the 95th percentile of the largest improvement any candidate gets on data

@@ -11,9 +11,9 @@
 //! criterion needs >= 100); `NULL_MODULUS_KPA=E` at another true modulus (default 170);
 //! `NULL_WITHOUT_LOADS=1` drops the loads (the selection then reads the radius alone).
 
-use host::diagnosis::simulate::{SimSpec, simulate_with, truth_mechanics, truth_scenario};
-use host::diagnosis::tables::{EffectAxis, read_effect_table, shipped_tables_dir, sub_table};
-use host::diagnosis::{DiagnoseOptions, diagnose};
+use diagnosis::simulate::{SimSpec, simulate_with, truth_mechanics, truth_scenario};
+use diagnosis::tables::{EffectAxis, read_effect_table, shipped_tables_dir, sub_table};
+use diagnosis::{DiagnoseOptions, diagnose};
 
 fn false_positives(seeds: u64, modulus_kpa: f64) -> (usize, Vec<String>) {
     let effects: Vec<_> = EffectAxis::ALL

@@ -9,12 +9,12 @@
 //! (`DIAG_TABLES=DIR` reads the tables from DIR instead of the shipped ones, e.g. tables
 //! rebuilt with `tactile diagnose --build-tables DIR`).
 
-use fem_core::{CurveParams, solve_curve};
-use host::diagnosis::model::Surface;
-use host::diagnosis::simulate::{TRUTH_MAX_DEPTH_MM, TRUTH_STEPS};
-use host::diagnosis::tables::{
+use diagnosis::model::Surface;
+use diagnosis::simulate::{TRUTH_MAX_DEPTH_MM, TRUTH_STEPS};
+use diagnosis::tables::{
     EffectAxis, effect_base_params, read_effect_table, shipped_tables_dir, sub_table,
 };
+use fem_core::{CurveParams, solve_curve};
 
 fn tables_dir() -> std::path::PathBuf {
     std::env::var("DIAG_TABLES")
@@ -104,8 +104,8 @@ fn truth_minus_table_per_step() {
 #[test]
 #[ignore = "measurement (40 fem-core solves, ~1-2 min in release); run with --release -- --ignored --nocapture"]
 fn loo_calibration() {
-    use host::diagnosis::model::Model;
-    use host::diagnosis::noise_model::{lut_error_scale, table_error_knots};
+    use diagnosis::model::Model;
+    use diagnosis::noise_model::{lut_error_scale, table_error_knots};
     let t = read_effect_table(&tables_dir().join(EffectAxis::Thickness.file_name()))
         .expect("measurement setup");
     let lut = sub_table(&t.lut, &t.axis.select(t.axis.base_value())).expect("measurement setup");

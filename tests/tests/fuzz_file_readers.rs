@@ -196,7 +196,7 @@ fn curve_csv() {
         let Ok(text) = std::str::from_utf8(bytes) else {
             return Ok(());
         };
-        let Ok(curve) = host::curve_csv::parse_curve_csv(text, "fuzz.csv") else {
+        let Ok(curve) = fit::curve_csv::parse_curve_csv(text, "fuzz.csv") else {
             return Ok(());
         };
         for (i, row) in curve.rows.iter().enumerate() {
@@ -269,7 +269,7 @@ fn effect_table() {
             .flatten()
         {
             std::fs::write(&path, &input).map_err(|e| e.to_string())?;
-            let _ = host::diagnosis::tables::read_effect_table(&path);
+            let _ = diagnosis::tables::read_effect_table(&path);
         }
         Ok(())
     });
@@ -339,21 +339,21 @@ fn hil_sim_curve_file() {
 fn calibration_record() {
     let dir = scratch("calibration");
     let path = dir.join("calibration.json");
-    let record = host::calibration::CalibrationRecord::new("E6614C311B4A2C2D", "1.0.0");
+    let record = experiment::calibration::CalibrationRecord::new("E6614C311B4A2C2D", "1.0.0");
     let seeds = vec![serde_json::to_vec_pretty(&record).unwrap()];
     fuzz("calibration_record", &seeds, |bytes| {
         std::fs::write(&path, bytes).map_err(|e| e.to_string())?;
-        let _ = host::calibration::load_record(&path);
+        let _ = experiment::calibration::load_record(&path);
         Ok(())
     });
     std::fs::remove_dir_all(&dir).ok();
 }
 
 fn check_image(bytes: &[u8]) -> Result<(), String> {
-    let Ok(image) = host::camera::image_file::decode_gray_image(bytes) else {
+    let Ok(image) = camera::image_file::decode_gray_image(bytes) else {
         return Ok(());
     };
-    let side = host::camera::image_file::MAX_IMAGE_SIDE_PX;
+    let side = camera::image_file::MAX_IMAGE_SIDE_PX;
     if image.width() > side || image.height() > side {
         return Err(format!(
             "accepted a {}x{} image",
@@ -372,9 +372,9 @@ fn image_frames() {
     let dir = scratch("images");
     let (w, h) = (24usize, 16usize);
     let pixels: Vec<u8> = (0..w * h).map(|i| (i * 7 % 251) as u8).collect();
-    let image = host::camera::GrayImage::new(w, h, pixels.clone()).unwrap();
+    let image = vision::GrayImage::new(w, h, pixels.clone()).unwrap();
     let png = dir.join("frame.png");
-    host::camera::write_png(&png, &image).unwrap();
+    camera::write_png(&png, &image).unwrap();
     let mut p5 = format!("P5\n# a comment\n{w} {h}\n255\n").into_bytes();
     p5.extend_from_slice(&pixels);
     let mut p5_16 = format!("P5 {w} {h} 1023\n").into_bytes();
@@ -424,22 +424,22 @@ fn one_segment_elf(paddr: u32, data: &[u8]) -> Vec<u8> {
 fn firmware_elf_and_uf2() {
     let code: Vec<u8> = (0..600u32).map(|i| (i * 13 % 256) as u8).collect();
     let elf = one_segment_elf(0x1000_0000, &code);
-    let segments = host::usb::elf_image::load_segments(&elf).unwrap();
-    let uf2 = host::usb::uf2::FlashImage::from_segments(&segments)
+    let segments = usb::elf_image::load_segments(&elf).unwrap();
+    let uf2 = usb::uf2::FlashImage::from_segments(&segments)
         .unwrap()
         .to_uf2();
     fuzz("firmware_elf", &[elf], |bytes| {
-        if let Ok(segments) = host::usb::elf_image::load_segments(bytes)
-            && let Ok(image) = host::usb::uf2::FlashImage::from_segments(&segments)
+        if let Ok(segments) = usb::elf_image::load_segments(bytes)
+            && let Ok(image) = usb::uf2::FlashImage::from_segments(&segments)
         {
             // What is accepted converts to UF2 blocks that read back.
-            host::usb::uf2::parse_uf2(&image.to_uf2())
+            usb::uf2::parse_uf2(&image.to_uf2())
                 .map_err(|e| format!("accepted ELF gives unreadable UF2: {e}"))?;
         }
         Ok(())
     });
     fuzz("firmware_uf2", &[uf2], |bytes| {
-        let _ = host::usb::uf2::parse_uf2(bytes);
+        let _ = usb::uf2::parse_uf2(bytes);
         Ok(())
     });
 }

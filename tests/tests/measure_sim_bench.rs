@@ -9,19 +9,19 @@
 
 use std::time::Duration;
 
-use host::calibration::{
+use experiment::IndentationPlan;
+use experiment::calibration::{
     CalibrationRecord, RigidSampleCurve, SweepPlan, fit_sweep, load_latest, manometer_zero_kpa,
     proximity_sweep, save_record, tare_load,
 };
-use host::experiment::IndentationPlan;
-use host::experiment::measurement::{LutInfo, run_measurement};
-use host::experiment::simulated::{
+use experiment::measurement::{LutInfo, run_measurement};
+use experiment::records::RecordDir;
+use experiment::simulated::{
     DEMO_MAX_DEPTH_MM, DEMO_RIGID_MESH_LEVEL, DEMO_STEPS, SimRadiusSource, demo_scenario,
     fixture_lut_path, px_per_mm_from_reference_disc, reference_frame, rigid_scenario,
     start_and_connect,
 };
-use host::fit::LutModel;
-use host::records::RecordDir;
+use fit::LutModel;
 
 #[test]
 #[ignore = "real-time hil-sim runs (~25 s); release"]

@@ -10,8 +10,8 @@
 
 use hil_sim::camera::{CameraConfig, CameraRenderer, FrameScene};
 use hil_sim::rng::SimRng;
-use host::camera::GrayImage;
-use host::vision::{ContactRadiusConfig, ContactRadiusEstimator};
+use vision::GrayImage;
+use vision::{ContactRadiusConfig, ContactRadiusEstimator};
 
 fn scene(radius_px: f64) -> FrameScene {
     FrameScene::circle(radius_px)

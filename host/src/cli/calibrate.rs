@@ -7,14 +7,14 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Duration;
 
-use host::calibration::{
+use camera::read_gray_image;
+use experiment::calibration::{
     CalibrationRecord, RigidSampleCurve, SweepPlan, fit_sweep, load_latest, manometer_zero_kpa,
     proximity_sweep, save_record, tare_load,
 };
-use host::camera::read_gray_image;
-use host::link::{Link, LinkConfig, SerialTransport};
-use host::vision::contact_radius::ContactRadiusConfig;
-use host::vision::px_per_mm::PxPerMmCalibration;
+use link::{Link, LinkConfig, SerialTransport};
+use vision::contact_radius::ContactRadiusConfig;
+use vision::px_per_mm::PxPerMmCalibration;
 
 #[derive(Debug, Args)]
 pub struct CalibrateArgs {
@@ -98,7 +98,7 @@ fn base_record(dir: &std::path::Path, link: Option<&Link>) -> CalibrationRecord 
     });
     match load_latest(dir) {
         Ok((_, mut r)) if link.is_none() || r.device_serial == serial => {
-            r.created_unix_s = host::records::unix_now_s();
+            r.created_unix_s = experiment::records::unix_now_s();
             r
         }
         _ => CalibrationRecord::new(&serial, &fw),

@@ -1,12 +1,12 @@
-//! `tactile daemon`: the bench daemon (see `host::daemon` and docs/daemon-api.md).
+//! `tactile daemon`: the bench daemon (see `daemon` and docs/daemon-api.md).
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::Args;
-use host::daemon::{DaemonOptions, DeviceConfig, DeviceSource, api::DEFAULT_LISTEN};
-use host::link::LinkConfig;
+use daemon::{DaemonOptions, DeviceConfig, DeviceSource, api::DEFAULT_LISTEN};
+use link::LinkConfig;
 
 #[derive(Debug, Args)]
 #[command(group = clap::ArgGroup::new("device").required(true).args(["port", "sim"]))]
@@ -47,19 +47,19 @@ pub struct DaemonArgs {
     stream_hz: u16,
     /// Most HTTP connections open at once; at the cap the oldest connection that has not
     /// sent the token is closed for a newcomer.
-    #[arg(long, default_value_t = host::daemon::listener::MAX_CONNECTIONS, value_parser = clap::value_parser!(usize))]
+    #[arg(long, default_value_t = daemon::listener::MAX_CONNECTIONS, value_parser = clap::value_parser!(usize))]
     max_connections: usize,
 }
 
 /// The repository's shipped table.
 pub fn default_lut() -> PathBuf {
-    host::daemon::sim::shipped_lut()
+    daemon::sim::shipped_lut()
 }
 
 pub fn token_path(explicit: Option<PathBuf>) -> Result<PathBuf, String> {
     match explicit {
         Some(p) => Ok(p),
-        None => host::daemon::token::default_token_path().map_err(|e| e.to_string()),
+        None => daemon::token::default_token_path().map_err(|e| e.to_string()),
     }
 }
 
@@ -73,7 +73,7 @@ fn source(args: &DaemonArgs) -> Result<(DeviceSource, LinkConfig), String> {
     let mut scenario = match &args.scenario {
         Some(p) => hil_sim::scenario::Scenario::load(p)
             .map_err(|e| format!("scenario {}: {e}", p.display()))?,
-        None => host::daemon::jobs::default_sim_scenario(&host::daemon::sim::sim_lut()),
+        None => daemon::jobs::default_sim_scenario(&daemon::sim::sim_lut()),
     };
     scenario.name = format!("{}-daemon", scenario.name);
     let bench = hil_sim::bench::start(scenario.clone(), hil_sim::bench::BenchOptions::default())
@@ -118,7 +118,7 @@ pub fn run(args: DaemonArgs) -> ExitCode {
         records_dir: args.records.clone(),
         lut_path: args.lut.clone().unwrap_or_else(|| {
             if args.sim {
-                host::daemon::sim::sim_lut()
+                daemon::sim::sim_lut()
             } else {
                 default_lut()
             }
@@ -130,7 +130,7 @@ pub fn run(args: DaemonArgs) -> ExitCode {
             camera: args.camera.clone(),
         },
     };
-    match host::daemon::start(options) {
+    match daemon::start(options) {
         Ok(handle) => {
             eprintln!(
                 "tactile daemon listening on http://{} (token in {}{}); records in {}",

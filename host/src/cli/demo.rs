@@ -7,7 +7,7 @@ use clap::Args;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use host::experiment::simulated::{DemoOptions, run_demo};
+use experiment::simulated::{DemoOptions, run_demo};
 
 #[derive(Debug, Args)]
 pub struct DemoArgs {

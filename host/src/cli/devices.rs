@@ -1,8 +1,8 @@
 //! `tactile devices [--json]`: serial ports and our USB devices / RP2040 boot ROMs.
 
 use clap::Args;
-use host::usb::discovery::{UsbRole, discover};
 use std::process::ExitCode;
+use usb::discovery::{UsbRole, discover};
 
 #[derive(Debug, Args)]
 pub struct DevicesArgs {

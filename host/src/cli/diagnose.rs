@@ -8,10 +8,10 @@
 //! diagnosis failed, 2 bad input.
 
 use clap::Args;
-use host::diagnosis::tables::{
+use diagnosis::tables::{
     EffectAxis, EffectTable, build_effect_table, read_effect_table, shipped_tables_dir, sub_table,
 };
-use host::diagnosis::{DiagnoseOptions, data, diagnose, report};
+use diagnosis::{DiagnoseOptions, data, diagnose, report};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -97,7 +97,7 @@ pub fn run(args: DiagnoseArgs) -> ExitCode {
     }
     let mut curves = Vec::new();
     for path in &args.curves {
-        match host::curve_csv::read_curve_csv(path) {
+        match fit::curve_csv::read_curve_csv(path) {
             Ok(c) => curves.push((path.display().to_string(), c)),
             Err(e) => return bad_input(e),
         }
@@ -180,8 +180,8 @@ fn load_tables(args: &DiagnoseArgs) -> Result<Tables, String> {
 }
 
 fn simulate(args: &DiagnoseArgs, spec: &str) -> ExitCode {
-    use host::diagnosis::candidates::EffectKind;
-    use host::diagnosis::simulate::{Hidden, SimSpec, simulate, to_curve_csv};
+    use diagnosis::candidates::EffectKind;
+    use diagnosis::simulate::{Hidden, SimSpec, simulate, to_curve_csv};
     let hidden = if spec == "none" {
         None
     } else {
@@ -244,8 +244,8 @@ fn confusion(
     base: &fem_core::lut::Lut,
     effects: &[EffectTable],
 ) -> ExitCode {
-    use host::diagnosis::candidates::EffectKind;
-    use host::diagnosis::confusion::{ConfusionSpec, markdown, run};
+    use diagnosis::candidates::EffectKind;
+    use diagnosis::confusion::{ConfusionSpec, markdown, run};
     let mut spec = ConfusionSpec {
         seeds: args.seeds,
         bootstrap: args.bootstrap,
@@ -301,7 +301,7 @@ fn build_tables(dir: &Path, only: &[String]) -> ExitCode {
             continue;
         }
         let out = dir.join(axis.file_name());
-        let total = host::diagnosis::tables::effect_grid(axis).curve_count();
+        let total = diagnosis::tables::effect_grid(axis).curve_count();
         let done = AtomicUsize::new(0);
         let report = |r: &fem_core::lut::CurveReport| {
             let k = done.fetch_add(1, Ordering::Relaxed) + 1;

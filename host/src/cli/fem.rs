@@ -1,10 +1,10 @@
 //! `tactile fem curve`: simulate one indentation (fem-core) and write it as a measured-curve
-//! CSV (`host::curve_csv`) with the extra columns `h_mm` and `volume_mm3`, and every model
+//! CSV (`fit::curve_csv`) with the extra columns `h_mm` and `volume_mm3`, and every model
 //! parameter as `# key: value` metadata.
 
 use clap::{Args, Subcommand, ValueEnum};
 use fem_core::{Curve, CurveParams, FemError, MaterialLaw};
-use host::curve_csv::{CurveCsv, CurveRow, Phase, write_curve_csv};
+use fit::curve_csv::{CurveCsv, CurveRow, Phase, write_curve_csv};
 use std::path::PathBuf;
 use std::process::ExitCode;
 

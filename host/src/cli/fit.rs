@@ -3,7 +3,7 @@
 //! Exit codes: 0 success, 1 the fit failed, 2 bad input (file, CSV, table).
 
 use clap::Args;
-use host::fit::{FitOptions, LutModel, fit_modulus, points_from_curve_csv, recommend_pressure};
+use fit::{FitOptions, LutModel, fit_modulus, points_from_curve_csv, recommend_pressure};
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
@@ -32,7 +32,7 @@ pub fn default_lut_path() -> PathBuf {
 
 pub fn run(args: FitArgs) -> ExitCode {
     let file = args.curve.display().to_string();
-    let curve = match host::curve_csv::read_curve_csv(&args.curve) {
+    let curve = match fit::curve_csv::read_curve_csv(&args.curve) {
         Ok(c) => c,
         Err(e) => {
             eprintln!("error: {e}");

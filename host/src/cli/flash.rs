@@ -1,15 +1,15 @@
 //! `tactile flash FIRMWARE.elf [--uf2-out FILE]`: ELF -> UF2, or flashing over PICOBOOT.
 
 use clap::Args;
-use host::usb::bootsel_request::request_bootsel;
-use host::usb::discovery::list_serial_ports;
-use host::usb::elf_image::load_segments;
-use host::usb::picoboot::Picoboot;
-use host::usb::rusb_transport::RusbPicoboot;
-use host::usb::uf2::FlashImage;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
+use usb::bootsel_request::request_bootsel;
+use usb::discovery::list_serial_ports;
+use usb::elf_image::load_segments;
+use usb::picoboot::Picoboot;
+use usb::rusb_transport::RusbPicoboot;
+use usb::uf2::FlashImage;
 
 #[derive(Debug, Args)]
 pub struct FlashArgs {

@@ -7,14 +7,14 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Duration;
 
-use host::calibration::{CalibrationRecord, load_latest, load_record};
-use host::camera::{PixelFormat, V4l2Config, V4l2Source};
-use host::experiment::IndentationPlan;
-use host::experiment::camera_radius::{CameraRadiusSource, capture_reference};
-use host::experiment::measurement::{LutInfo, run_measurement};
-use host::fit::LutModel;
-use host::link::{Link, LinkConfig, SerialTransport};
-use host::records::{RecordDir, unix_now_s, utc_stamp};
+use camera::{PixelFormat, V4l2Config, V4l2Source};
+use experiment::IndentationPlan;
+use experiment::calibration::{CalibrationRecord, load_latest, load_record};
+use experiment::camera_radius::{CameraRadiusSource, capture_reference};
+use experiment::measurement::{LutInfo, run_measurement};
+use experiment::records::{RecordDir, unix_now_s, utc_stamp};
+use fit::LutModel;
+use link::{Link, LinkConfig, SerialTransport};
 
 #[derive(Debug, Args)]
 pub struct MeasureArgs {

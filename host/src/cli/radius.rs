@@ -6,14 +6,14 @@
 //! `radius_px`, `center_px`, `ellipse`, `quality`, `contact`, and the time per frame on
 //! stderr.
 
-use clap::Args;
-use host::camera::{
+use camera::{
     CameraError, Frame, FrameDirSource, FrameSource, GrayImage, MjpegFileSource, read_gray_image,
 };
-use host::vision::{ContactRadius, ContactRadiusConfig, ContactRadiusEstimator};
+use clap::Args;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
+use vision::{ContactRadius, ContactRadiusConfig, ContactRadiusEstimator};
 
 #[derive(Debug, Args)]
 pub struct RadiusArgs {

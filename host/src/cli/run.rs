@@ -3,7 +3,7 @@
 use std::process::ExitCode;
 
 use clap::Args;
-use host::daemon::api::{Event, ExperimentRequest};
+use daemon::api::{Event, ExperimentRequest};
 
 use super::status::DaemonAddr;
 
@@ -123,7 +123,7 @@ pub fn run(args: RunArgs) -> ExitCode {
                     if let Some(r) = j.record {
                         println!("record: {r}");
                     }
-                    return if j.state == host::daemon::JobState::Complete {
+                    return if j.state == daemon::JobState::Complete {
                         ExitCode::SUCCESS
                     } else {
                         ExitCode::FAILURE

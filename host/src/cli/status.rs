@@ -4,8 +4,8 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::Args;
-use host::daemon::Client;
-use host::daemon::api::DEFAULT_LISTEN;
+use daemon::Client;
+use daemon::api::DEFAULT_LISTEN;
 
 /// Where the daemon is and how to prove who we are (shared by the client commands).
 #[derive(Debug, Clone, Args)]

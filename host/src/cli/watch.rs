@@ -1,11 +1,11 @@
-//! `tactile watch`: the live dashboard (see `host::dashboard`).
+//! `tactile watch`: the live dashboard (see `daemon::terminal_view`).
 
 use std::process::ExitCode;
 use std::sync::mpsc;
 use std::time::Duration;
 
 use clap::Args;
-use host::dashboard::{DashboardState, render};
+use daemon::terminal_view::{DashboardState, render};
 use ratatui::crossterm::event::{self, Event as TermEvent, KeyCode, KeyModifiers};
 
 use super::status::DaemonAddr;

@@ -1,0 +1,116 @@
+//! The running fit: a worker thread that owns the lookup table and fits the modulus to the
+//! a–u_s points gathered so far whenever it is handed a batch (the device thread never
+//! waits for it), publishing [`Event::Fit`] with the model curve at the estimate.
+
+use std::path::Path;
+use std::sync::Arc;
+
+use fem_core::lut::Lut;
+use std::sync::mpsc::{Receiver, Sender, channel};
+
+use tokio::sync::broadcast;
+
+use super::api::{Event, FitSummary};
+use fit::{FitOptions, FitPoint, LutModel, ModulusFit, fit_modulus};
+
+/// One request: fit `points`; `reply` gets the result (final fits).
+#[derive(Debug)]
+pub struct FitRequest {
+    pub points: Vec<FitPoint>,
+    pub final_fit: bool,
+    pub reply: Option<Sender<Result<ModulusFit, String>>>,
+}
+
+/// Handle of the worker (dropping it ends the thread).
+#[derive(Debug, Clone)]
+pub struct FitWorker {
+    tx: Sender<FitRequest>,
+}
+
+impl FitWorker {
+    /// Starts the worker on `lut`.
+    pub fn start(lut: Arc<Lut>, events: broadcast::Sender<Event>) -> Result<Self, String> {
+        let (tx, rx) = channel::<FitRequest>();
+        std::thread::Builder::new()
+            .name("daemon-fit".into())
+            .spawn(move || run(&lut, rx, events))
+            .map_err(|e| e.to_string())?;
+        Ok(Self { tx })
+    }
+
+    /// Queues a fit (the newest running fit supersedes older queued ones).
+    pub fn submit(&self, request: FitRequest) {
+        let _ = self.tx.send(request);
+    }
+
+    /// Fits and waits for the result.
+    pub fn fit_now(&self, points: Vec<FitPoint>) -> Result<ModulusFit, String> {
+        let (reply, rx) = channel();
+        self.submit(FitRequest {
+            points,
+            final_fit: true,
+            reply: Some(reply),
+        });
+        rx.recv()
+            .map_err(|_| "the fit worker stopped".to_string())?
+    }
+}
+
+/// The model a(u_s) at `fit`'s modulus over the points' u_s range (40 points).
+pub fn model_curve(model: &LutModel<'_>, fit: &ModulusFit, points: &[FitPoint]) -> Vec<[f64; 2]> {
+    let p = fit.pressures_kpa.first().copied().unwrap_or(0.0);
+    let hi = points.iter().map(|q| q.u_s_mm).fold(0.0f64, f64::max);
+    (0..=40)
+        .filter_map(|k| {
+            let u = hi * f64::from(k) / 40.0;
+            model
+                .sample(fit.modulus_kpa, p, u)
+                .ok()
+                .map(|s| [u, s.a_mm])
+        })
+        .collect()
+}
+
+pub fn summary(fit: &ModulusFit) -> FitSummary {
+    FitSummary {
+        modulus_kpa: fit.modulus_kpa,
+        ci95_kpa: fit.ci95_kpa,
+        rms_residual_mm: fit.rms_residual_mm,
+        points: fit.points_used,
+        p_air_kpa: fit.pressures_kpa.first().copied().unwrap_or(0.0),
+    }
+}
+
+/// Reads and checks a table.
+pub fn load_lut(path: &Path) -> Result<Arc<Lut>, String> {
+    let file = fem_core::lut::read_lut(path)
+        .map_err(|e| format!("lookup table {}: {e}", path.display()))?;
+    LutModel::new(&file.lut).map_err(|e| format!("lookup table {}: {e}", path.display()))?;
+    Ok(Arc::new(file.lut))
+}
+
+fn run(lut: &Lut, rx: Receiver<FitRequest>, events: broadcast::Sender<Event>) {
+    let Ok(model) = LutModel::new(lut) else {
+        return;
+    };
+    while let Ok(mut request) = rx.recv() {
+        // Skip running fits that a newer one supersedes (never a final one).
+        while !request.final_fit {
+            match rx.try_recv() {
+                Ok(next) => request = next,
+                Err(_) => break,
+            }
+        }
+        let result = fit_modulus(&model, &request.points, FitOptions::default());
+        if let Ok(fit) = &result {
+            let _ = events.send(Event::Fit {
+                fit: summary(fit),
+                model: model_curve(&model, fit, &request.points),
+                final_fit: request.final_fit,
+            });
+        }
+        if let Some(reply) = request.reply {
+            let _ = reply.send(result.map_err(|e| e.to_string()));
+        }
+    }
+}

@@ -1,0 +1,476 @@
+//! The jobs the device thread runs: an indentation experiment (record, live feed, final
+//! fit) and, on the simulated bench, a calibration (rigid-sample proximity parabola and
+//! camera px/mm, as `tactile demo` does it).
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Duration;
+
+use protocol::Request;
+
+use super::api::{Event, ExperimentRequest, Job, JobState};
+use super::device_thread::{DeviceThread, link_lost};
+use super::fit_worker::{model_curve, summary};
+use super::guarded_transport::StopKind;
+use super::live_radius::LiveRadius;
+use experiment::calibration::{CalibrationRecord, ProximityCalibration};
+use experiment::records::{RecordDir, unix_now_s, utc_stamp};
+use experiment::{ExperimentError, IndentationPlan, run_indentation};
+use fit::{FitPoint, LutModel};
+use link::Link;
+use vision::px_per_mm::PxPerMmCalibration;
+
+/// How an experiment left the link, when it cannot be used any more.
+#[derive(Debug)]
+pub enum JobEnd {
+    Lost(String),
+    Stopped,
+}
+
+/// A calibration as experiments use it.
+#[derive(Debug, Clone)]
+pub struct LoadedCalibration {
+    pub path: PathBuf,
+    pub record: CalibrationRecord,
+}
+
+impl LoadedCalibration {
+    /// The proximity parabola calibrated nearest to `p_air_kpa`.
+    pub fn proximity_near(&self, p_air_kpa: f64) -> Option<ProximityCalibration> {
+        self.record
+            .proximity
+            .iter()
+            .min_by(|a, b| {
+                (a.p_air_kpa - p_air_kpa)
+                    .abs()
+                    .total_cmp(&(b.p_air_kpa - p_air_kpa).abs())
+            })
+            .copied()
+    }
+
+    pub fn px_per_mm(&self) -> Option<PxPerMmCalibration> {
+        self.record.px_per_mm.map(|k| PxPerMmCalibration {
+            px_per_mm: k,
+            px_per_mm_sigma: self.record.px_per_mm_sigma.unwrap_or(0.0),
+            offset_px: self.record.px_offset_px,
+            samples: 0,
+        })
+    }
+}
+
+/// The newest calibration record in `dir`.
+pub fn latest_calibration(dir: &Path) -> Option<LoadedCalibration> {
+    load_calibration(dir).ok()
+}
+
+/// The newest valid calibration, or why there is none (naming the rejected files).
+pub fn load_calibration(
+    dir: &Path,
+) -> Result<LoadedCalibration, experiment::calibration::CalibrationStoreError> {
+    let (path, record) = experiment::calibration::record::load_latest(dir)?;
+    Ok(LoadedCalibration { path, record })
+}
+
+/// Calibration on the simulated bench: camera px/mm from rendered reference discs and the
+/// proximity parabola on a rigid sample at 6 kPa (a second in-process bench, as
+/// `tactile demo` does). Returns the record's path.
+#[cfg(feature = "sim")]
+pub fn calibrate_sim(scenario: &hil_sim::scenario::Scenario, dir: &Path) -> Result<String, String> {
+    use experiment::calibration::RigidSampleCurve;
+    use experiment::simulated::{
+        DEMO_MAX_DEPTH_MM, DEMO_RIGID_MESH_LEVEL, DEMO_STEPS, px_per_mm_from_reference_disc,
+        rigid_calibration, rigid_scenario, start_and_connect,
+    };
+    let px = px_per_mm_from_reference_disc(scenario, &[1.2, 2.0, 2.8, 3.4])
+        .map_err(|e| e.to_string())?;
+    let surface = scenario.stage.surface_mm;
+    let pressure = 6.0;
+    let (bench, mut link) =
+        start_and_connect(rigid_scenario(scenario, pressure)).map_err(|e| e.to_string())?;
+    // u_s(h) on the rigid sample from fem-core with the simulated rigid sample's own solver
+    // settings (`rigid_scenario` solves at DEMO_RIGID_MESH_LEVEL; u_s = h would be wrong by up
+    // to 27 µm, about -2 % in E2 at 200 kPa).
+    let rigid = RigidSampleCurve::solve(
+        pressure,
+        DEMO_RIGID_MESH_LEVEL,
+        DEMO_STEPS,
+        DEMO_MAX_DEPTH_MM,
+    )
+    .map_err(|e| format!("rigid-sample u_s(h): {e}"))?;
+    let (sweep, zero) = rigid_calibration(
+        &mut link,
+        pressure,
+        surface - 0.3,
+        surface + 1.6,
+        Some(&rigid),
+    )
+    .map_err(|e| e.to_string())?;
+    let serial = link.info().serial.to_string();
+    let firmware = link.info().firmware_version.to_string();
+    drop(link);
+    bench.stop();
+    let mut created = unix_now_s();
+    // One record per second at most (file names are the creation second).
+    while dir.join(format!("calibration-{created}.json")).exists() {
+        created += 1;
+    }
+    let mut record = CalibrationRecord::new(&serial, &firmware);
+    record.created_unix_s = created;
+    record.set_proximity(&sweep);
+    record.px_per_mm = Some(px.px_per_mm);
+    record.px_per_mm_sigma = Some(px.px_per_mm_sigma);
+    record.px_offset_px = px.offset_px;
+    record.manometer_zero_kpa = zero;
+    let path =
+        experiment::calibration::record::save_record(dir, &record).map_err(|e| e.to_string())?;
+    Ok(path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default())
+}
+
+/// The daemon's default simulated bench: the paper's gelatin (200 kPa) with the mechanics
+/// read from `lut` (the table the fit uses, so a simulated run fits its own model).
+#[cfg(feature = "sim")]
+pub fn default_sim_scenario(lut: &Path) -> hil_sim::scenario::Scenario {
+    hil_sim::scenario::Scenario {
+        name: "daemon-gelatin".into(),
+        mechanics: hil_sim::scenario::MechanicsSource::Lut {
+            path: lut.to_path_buf(),
+        },
+        ..hil_sim::scenario::Scenario::default()
+    }
+}
+
+fn plan_of(r: &ExperimentRequest) -> IndentationPlan {
+    IndentationPlan {
+        pressure_kpa: r.pressure_kpa,
+        start_mm: r.start_mm,
+        depth_mm: r.depth_mm,
+        speed_mm_per_s: r.speed_mm_per_s,
+        repeats: r.repeats,
+        stream_rate_hz: r.stream_rate_hz,
+    }
+}
+
+/// Runs one experiment job. `None`: the link is still usable.
+pub fn run_experiment(dt: &mut DeviceThread, link: &mut Link, job: Job) -> Option<JobEnd> {
+    let Some(request) = job.experiment.clone() else {
+        dt.finish_job(job.id, JobState::Failed, "no parameters".into(), None);
+        return None;
+    };
+    let cal = match load_calibration(&dt.shared.calibrations_dir) {
+        Ok(cal) => cal,
+        Err(e) => {
+            dt.finish_job(
+                job.id,
+                JobState::Failed,
+                format!("{e} (on the simulated bench: POST /v1/calibrations makes one)"),
+                None,
+            );
+            return None;
+        }
+    };
+    let (Some(proximity), Some(px)) = (cal.proximity_near(request.pressure_kpa), cal.px_per_mm())
+    else {
+        dt.finish_job(
+            job.id,
+            JobState::Failed,
+            format!(
+                "{}: calibration lacks a proximity parabola or the camera scale",
+                cal.path.display()
+            ),
+            None,
+        );
+        return None;
+    };
+    let name = format!("{}-job{}", utc_stamp(unix_now_s()), job.id);
+    let record = match RecordDir::create(&dt.shared.records_dir.join(&name)) {
+        Ok(r) => r,
+        Err(e) => {
+            dt.finish_job(job.id, JobState::Failed, e.to_string(), None);
+            return None;
+        }
+    };
+    dt.shared.update_job(job.id, |j| {
+        j.record = Some(name.clone());
+        j.message = "preparing".into();
+    });
+    let zero = cal.record.manometer_zero_kpa;
+    let mut meta = serde_json::json!({
+        "software": { "name": "tactile daemon", "version": env!("CARGO_PKG_VERSION") },
+        "job": job.id,
+        "protocol_version": link.info().protocol_version,
+        "device": {
+            "serial": link.info().serial.as_str(),
+            "firmware_version": link.info().firmware_version.as_str(),
+            "port": link.port_name(),
+        },
+        "lut": { "path": dt.lut_path.display().to_string() },
+        "calibration": { "path": cal.path.display().to_string(), "record": cal.record },
+        "plan": request,
+        "status": "running",
+        "started_unix_s": unix_now_s(),
+    });
+    let _ = record.write_json("meta.json", &meta);
+    let switch = Arc::clone(&dt.shared.switch);
+    if let Ok(mut tap) = switch.tap.lock() {
+        tap.proximity = Some(proximity);
+        tap.manometer_zero_kpa = zero;
+        tap.capture = Some(Vec::new());
+    }
+    let plan = plan_of(&request);
+    let shared = Arc::clone(&dt.shared);
+    let id = job.id;
+    let mut on_progress = move |fraction: f64, message: String| {
+        let mut st = shared.lock();
+        if let Some(j) = st.jobs.iter_mut().find(|j| j.id == id)
+            && ((j.progress - fraction).abs() > 1e-9 || j.message != message)
+        {
+            j.progress = fraction;
+            j.message = message;
+            let job = j.clone();
+            drop(st);
+            let _ = shared.events.send(Event::Job { job });
+        }
+    };
+    let progress = indicatif::ProgressBar::hidden();
+    let outcome = run_with_source(
+        dt,
+        link,
+        &plan,
+        &proximity,
+        zero,
+        px,
+        &record,
+        &progress,
+        &mut on_progress,
+    );
+    if let Ok(mut tap) = switch.tap.lock() {
+        tap.proximity = None;
+        tap.capture = None;
+    }
+    let stats = link.stats();
+    meta["link"] = serde_json::to_value(stats).unwrap_or_default();
+    // The pressure trace plot, for complete and partial records alike.
+    if let Err(e) = fit::plots::write_pressure_trace(&record.dir) {
+        meta["notes"] = serde_json::json!([format!("pressure trace not plotted: {e}")]);
+    }
+    meta["finished_unix_s"] = serde_json::json!(unix_now_s());
+    match outcome {
+        Ok((result, live_points)) => {
+            let final_points: Vec<FitPoint> = result
+                .points
+                .iter()
+                .filter(|(_, p)| p.a_mm > 0.0 && p.u_s_mm > 0.0)
+                .map(|(t, p)| FitPoint {
+                    u_s_mm: p.u_s_mm,
+                    a_mm: p.a_mm,
+                    p_air_kpa: plan.pressure_kpa,
+                    test: *t,
+                    load_n: p.load_n,
+                })
+                .collect();
+            write_curve(&record, &result, plan.pressure_kpa);
+            meta["live_points"] = serde_json::json!(live_points);
+            match dt.fit.fit_now(final_points.clone()) {
+                Ok(fit) => {
+                    let _ = record.write_json("fit.json", &fit);
+                    if let Ok(model) = LutModel::new(&dt.lut) {
+                        let _ =
+                            fit::plots::write_fit_plots(&record.dir, &model, &final_points, &fit);
+                        let _ = model_curve(&model, &fit, &final_points);
+                    }
+                    meta["status"] = serde_json::json!("complete");
+                    let _ = record.write_json("meta.json", &meta);
+                    let s = summary(&fit);
+                    dt.shared.update_job(id, |j| j.fit = Some(s));
+                    dt.finish_job(
+                        id,
+                        JobState::Complete,
+                        format!(
+                            "E2 = {:.1} kPa (95 % CI {:.1} .. {:.1})",
+                            fit.modulus_kpa, fit.ci95_kpa[0], fit.ci95_kpa[1]
+                        ),
+                        None,
+                    );
+                }
+                Err(e) => {
+                    meta["status"] = serde_json::json!(format!("complete; fit failed: {e}"));
+                    let _ = record.write_json("meta.json", &meta);
+                    dt.finish_job(id, JobState::Failed, format!("fit failed: {e}"), None);
+                }
+            }
+            None
+        }
+        Err(e) => {
+            let stopped = dt.stopped_by();
+            let (state, message) = match stopped {
+                Some(StopKind::Emergency) => (JobState::Partial, "emergency stop".to_string()),
+                Some(StopKind::Cancel) => (JobState::Cancelled, "cancelled".to_string()),
+                None => (JobState::Partial, e.to_string()),
+            };
+            meta["status"] = serde_json::json!(format!("partial: {message}"));
+            let _ = record.write_json("meta.json", &meta);
+            let lost = match &e {
+                _ if stopped.is_some() => None,
+                ExperimentError::Link(le) => link_lost(le),
+                ExperimentError::DeviceSilent { .. } => Some(e.to_string()),
+                _ => None,
+            };
+            if lost.is_some() {
+                // The status says so before the job's end is published.
+                dt.shared.lock().status.connected = false;
+            }
+            dt.finish_job(id, state, format!("{message}; partial record kept"), None);
+            if stopped.is_some() {
+                return Some(JobEnd::Stopped);
+            }
+            if let Some(r) = lost {
+                return Some(JobEnd::Lost(r));
+            }
+            // Still connected: leave the device safe.
+            for r in [Request::StopStage, Request::PressureOff] {
+                if let Err(le) = link.request(r)
+                    && let Some(reason) = link_lost(&le)
+                {
+                    return Some(JobEnd::Lost(reason));
+                }
+            }
+            None
+        }
+    }
+}
+
+fn write_curve(record: &RecordDir, result: &experiment::IndentationResult, p: f64) {
+    use fit::curve_csv::{CurveCsv, CurveRow, write_curve_csv};
+    let rows: Vec<CurveRow> = result
+        .points
+        .iter()
+        .map(|(t, q)| CurveRow {
+            u_s_mm: q.u_s_mm,
+            a_mm: q.a_mm,
+            load_n: q.load_n,
+            p_air_kpa: Some(q.p_air_kpa),
+            t_s: Some(q.t_s),
+            phase: Some(q.phase),
+            test: Some(*t),
+            h_mm: None,
+            volume_mm3: None,
+        })
+        .collect();
+    let _ = write_curve_csv(
+        &record.path("curve.csv"),
+        &CurveCsv {
+            metadata: vec![("p_air_kpa".into(), format!("{p}"))],
+            rows,
+        },
+    );
+}
+
+#[allow(clippy::too_many_arguments)]
+fn run_with_source(
+    dt: &mut DeviceThread,
+    link: &mut Link,
+    plan: &IndentationPlan,
+    proximity: &ProximityCalibration,
+    zero: f64,
+    px: PxPerMmCalibration,
+    record: &RecordDir,
+    progress: &indicatif::ProgressBar,
+    on_progress: &mut dyn FnMut(f64, String),
+) -> Result<(experiment::IndentationResult, usize), ExperimentError> {
+    let units = *link.units();
+    let switch = Arc::clone(&dt.shared.switch);
+    let fit = dt.fit.clone();
+    match &dt.source {
+        #[cfg(feature = "sim")]
+        super::device_thread::DeviceSource::Sim { bench, scenario } => {
+            use experiment::simulated::{SimRadiusSource, reference_frame};
+            link.request(Request::Vent { open: false })?;
+            link.request(Request::SetLed {
+                duty_per_10k: 10_000,
+            })?;
+            link.request(Request::SetPressure {
+                setpoint_kpa: (plan.pressure_kpa + zero) as f32,
+            })?;
+            on_progress(0.0, "reference frame".into());
+            let reference =
+                reference_frame(link, bench, Duration::from_millis(1000)).map_err(sim_error)?;
+            let mut inner =
+                SimRadiusSource::new(bench, &scenario.clock, reference, px).map_err(sim_error)?;
+            let mut live = LiveRadius::new(
+                &mut inner,
+                switch,
+                fit,
+                units,
+                *proximity,
+                plan.pressure_kpa,
+                plan.start_mm,
+                progress.clone(),
+                on_progress,
+            );
+            let r = run_indentation(link, &mut live, plan, proximity, zero, record, progress)?;
+            Ok((r, live.points.len()))
+        }
+        super::device_thread::DeviceSource::Port { .. } => {
+            use camera::{V4l2Config, V4l2Source};
+            use experiment::camera_radius::{CameraRadiusSource, capture_reference};
+            let camera_error = |reason: String| {
+                ExperimentError::Record(experiment::records::RecordError::Encode {
+                    path: record.dir.clone(),
+                    reason,
+                })
+            };
+            let Some(device) = dt.config.camera.clone() else {
+                return Err(camera_error(
+                    "no camera: start the daemon with --camera DEV".into(),
+                ));
+            };
+            link.request(Request::Vent { open: false })?;
+            link.request(Request::SetLed {
+                duty_per_10k: 10_000,
+            })?;
+            link.request(Request::SetPressure {
+                setpoint_kpa: (plan.pressure_kpa + zero) as f32,
+            })?;
+            on_progress(0.0, "reference frame".into());
+            link.pump(Duration::from_millis(1000))?;
+            // The camera is opened per experiment, so one unplugged and plugged back in
+            // between experiments is simply found again.
+            let mut source = V4l2Source::open(&V4l2Config {
+                device: Some(PathBuf::from(&device)),
+                ..V4l2Config::default()
+            })
+            .map_err(|e| camera_error(format!("camera {device}: {e}")))?;
+            let reference = capture_reference(&mut source, 10)
+                .map_err(|e| camera_error(format!("camera {device}: {e}")))?;
+            let mut inner = CameraRadiusSource::start(source, reference, px)
+                .map_err(|e| camera_error(format!("camera {device}: {e}")))?;
+            let mut live = LiveRadius::new(
+                &mut inner,
+                switch,
+                fit,
+                units,
+                *proximity,
+                plan.pressure_kpa,
+                plan.start_mm,
+                progress.clone(),
+                on_progress,
+            );
+            let r = run_indentation(link, &mut live, plan, proximity, zero, record, progress)?;
+            Ok((r, live.points.len()))
+        }
+    }
+}
+
+#[cfg(feature = "sim")]
+fn sim_error(e: experiment::simulated::SimRunError) -> ExperimentError {
+    match e {
+        experiment::simulated::SimRunError::Link(l) => ExperimentError::Link(l),
+        other => ExperimentError::Record(experiment::records::RecordError::Encode {
+            path: PathBuf::new(),
+            reason: other.to_string(),
+        }),
+    }
+}

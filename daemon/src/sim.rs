@@ -1,0 +1,81 @@
+//! A daemon on the simulated bench with test-friendly defaults (an ephemeral loopback
+//! port, the shipped table, patient link timeouts): used by the system tests, the
+//! benchmarks and `tactile daemon --sim`.
+
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use hil_sim::bench::{BenchOptions, start as start_bench};
+use hil_sim::scenario::Scenario;
+
+use super::device_thread::{DeviceConfig, DeviceSource};
+use super::server::{DaemonError, DaemonHandle, DaemonOptions, start};
+use link::LinkConfig;
+
+/// The repository's shipped production lookup table (for real hardware).
+pub fn shipped_lut() -> PathBuf {
+    fem_core::shipped::default_lut_path()
+}
+
+/// The table of the simulated bench: the demo's fit fixture (a full modulus x pressure
+/// grid; the shipped table lacks one failed curve, which hil-sim's table mechanics
+/// refuse). The simulated sample's mechanics and the fit both use it.
+pub fn sim_lut() -> PathBuf {
+    experiment::simulated::fixture_lut_path()
+}
+
+/// Starts hil-sim with `scenario` (default: [`super::jobs::default_sim_scenario`]) and a
+/// daemon on it, listening on `listen` (e.g. `127.0.0.1:0` for any free port).
+pub fn start_sim_daemon(
+    scenario: Option<Scenario>,
+    listen: SocketAddr,
+    records_dir: &Path,
+    token_file: &Path,
+    idle_stream_hz: u16,
+) -> Result<DaemonHandle, DaemonError> {
+    start_sim_daemon_capped(
+        scenario,
+        listen,
+        records_dir,
+        token_file,
+        idle_stream_hz,
+        super::listener::MAX_CONNECTIONS,
+    )
+}
+
+/// [`start_sim_daemon`] with another connection cap.
+pub fn start_sim_daemon_capped(
+    scenario: Option<Scenario>,
+    listen: SocketAddr,
+    records_dir: &Path,
+    token_file: &Path,
+    idle_stream_hz: u16,
+    max_connections: usize,
+) -> Result<DaemonHandle, DaemonError> {
+    let lut = sim_lut();
+    let scenario = scenario.unwrap_or_else(|| super::jobs::default_sim_scenario(&lut));
+    let bench = start_bench(scenario.clone(), BenchOptions::default())
+        .map_err(|e| DaemonError::Start(format!("hil-sim: {e}")))?;
+    start(DaemonOptions {
+        source: DeviceSource::Sim {
+            bench,
+            scenario: Box::new(scenario),
+        },
+        listen,
+        allow_remote: false,
+        token_file: token_file.to_path_buf(),
+        records_dir: records_dir.to_path_buf(),
+        lut_path: lut,
+        max_connections,
+        device: DeviceConfig {
+            idle_stream_hz,
+            // The simulation can fall behind the wall clock on a loaded machine.
+            link: LinkConfig {
+                request_timeout: Duration::from_millis(1000),
+                ..LinkConfig::default()
+            },
+            camera: None,
+        },
+    })
+}

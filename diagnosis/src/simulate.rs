@@ -1,0 +1,298 @@
+//! Hidden-effect data for tests and the confusion matrix, from hil-sim's plant in simulated
+//! time: the contact mechanics are hil-sim's (`mechanics_source::build_mechanics`: direct
+//! fem-core solves at the sample's true parameters — a real thinner layer, real friction,
+//! the Yeoh stiffening law — at the truth's off-grid modulus and true internal pressure),
+//! the history and measurement effects are hil-sim's own code (`effects::EffectState` for
+//! viscoelastic relaxation and adhesion, `EffectsConfig::camera_radius_mm` and
+//! `proximity_error_mm` for the camera and proximity effects).
+//!
+//! The firmware, serial link and image path are not run (that takes real time); the noise
+//! they add is replaced by an equivalent stated here, sized to the demo's residual RMS
+//! (~0.012 mm) at noise level 1: per frame (30 fps, stage at 1 mm/s from contact) white
+//! noise on a (0.004 mm: vision and frame timing) and on u_s (0.004 mm: proximity sensor),
+//! per indentation a u_s tare offset (0.004 mm) and an a offset (0.002 mm), and a smooth
+//! Ornstein–Uhlenbeck drift of u_s (0.004 mm rms, time constant 0.3 s); on the load, the
+//! load cell's white noise (hil-sim's 40 counts at its 0.438 counts/uN: 0.09 mN) and a tare
+//! error per indentation (0.03 mN, the mean of the pre-contact samples). The `test` column
+//! marks the replicates; `p_air_kpa` is the set point (the manometer's reading).
+
+use hil_sim::effects::{EffectState, EffectsConfig, ViscoelasticConfig};
+use hil_sim::mechanics::MechanicsModel;
+use hil_sim::rng::SimRng;
+use hil_sim::scenario::{MechanicsSource, Scenario};
+
+use super::candidates::EffectKind;
+use super::data::Point;
+use super::tables::{EFFECT_MAX_DEPTH_MM, EFFECT_MESH_LEVEL};
+
+/// Load steps of the truth solves: the tables' step of 0.1 mm of tube travel (mesh level
+/// and steps must match, or the difference shows up as structure), to 1.9 mm (the ramp
+/// goes to 1.8 mm; the last 0.1 mm of the tables is where thin or soft samples can stop
+/// converging).
+pub const TRUTH_STEPS: usize = super::tables::EFFECT_STEPS - 1;
+/// Final tube travel of the truth solves.
+pub const TRUTH_MAX_DEPTH_MM: f64 =
+    EFFECT_MAX_DEPTH_MM * (TRUTH_STEPS as f64) / (super::tables::EFFECT_STEPS as f64);
+
+/// The hidden effect of a simulation (never given to the diagnosis).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Hidden {
+    pub kind: EffectKind,
+    pub size: f64,
+}
+
+/// A simulated experiment.
+#[derive(Debug, Clone)]
+pub struct SimSpec {
+    pub modulus_kpa: f64,
+    pub pressures_kpa: Vec<f64>,
+    pub replicates: usize,
+    pub hidden: Option<Hidden>,
+    /// Noise level (1 = the demo's).
+    pub noise: f64,
+    pub fps: f64,
+    pub speed_mm_per_s: f64,
+    pub max_travel_mm: f64,
+    pub seed: u64,
+}
+
+impl Default for SimSpec {
+    fn default() -> Self {
+        Self {
+            modulus_kpa: 170.0,
+            pressures_kpa: vec![6.0, 15.0],
+            replicates: 5,
+            hidden: None,
+            noise: 1.0,
+            fps: 30.0,
+            speed_mm_per_s: 1.0,
+            max_travel_mm: 1.8,
+            seed: 1,
+        }
+    }
+}
+
+/// "Clearly detectable" and "small" sizes of each effect used by the tests and the confusion
+/// matrix (parameter units of [`EffectKind::parameter`]).
+pub fn sizes(kind: EffectKind) -> [f64; 2] {
+    match kind {
+        EffectKind::FiniteThickness => [1.5, 3.0],
+        EffectKind::Friction => [0.2, 0.4],
+        EffectKind::StrainStiffening => [3.0, 10.0],
+        EffectKind::Viscoelastic => [0.15, 0.35],
+        EffectKind::Adhesion => [40.0, 120.0],
+        EffectKind::RadiusOffset => [0.02, 0.05],
+        EffectKind::RadiusScale => [0.015, 0.04],
+        EffectKind::DisplacementOffset => [0.02, 0.06],
+        // the baseline table covers true pressures 4-8 and 13-17 kPa: offsets up to 2 kPa of
+        // the 6 and 15 kPa set points (minimum detectable ~1.4 kPa at noise 1)
+        EffectKind::PressureOffset => [1.0, 2.0],
+    }
+}
+
+/// The true modulus of the test cases (off-grid: the tables' nodes near it are 146.8 and
+/// 215.4 kPa): 170 kPa, except for strain stiffening, which only a soft sample shows (the
+/// pressurised shell takes most of the travel on stiff ones): 40 kPa (nodes 31.62, 46.42).
+pub fn truth_modulus_kpa(kind: Option<EffectKind>) -> f64 {
+    match kind {
+        Some(EffectKind::StrainStiffening) => 40.0,
+        _ => 170.0,
+    }
+}
+
+/// The scenario of the truth: sample, mechanics source and hidden effects.
+pub fn truth_scenario(spec: &SimSpec) -> Scenario {
+    let mut s = Scenario {
+        name: "diagnosis-truth".into(),
+        seed: spec.seed,
+        ..Scenario::default()
+    };
+    s.sample.modulus_kpa = spec.modulus_kpa;
+    let mut effects = EffectsConfig::default();
+    let mut pressures = spec.pressures_kpa.clone();
+    let mut factors = vec![1.0];
+    if let Some(h) = spec.hidden {
+        match h.kind {
+            EffectKind::FiniteThickness => s.sample.thickness_mm -= h.size,
+            EffectKind::Friction => s.sample.friction = h.size,
+            EffectKind::StrainStiffening => s.sample.stiffening = h.size,
+            EffectKind::Viscoelastic => {
+                effects.viscoelastic = Some(ViscoelasticConfig {
+                    relaxed_fraction: h.size,
+                    tau_s: 1.5,
+                });
+                let lo = 1.0 - h.size - 0.05;
+                factors = vec![lo, 0.5 * (lo + 1.0), 1.0];
+            }
+            EffectKind::Adhesion => effects.adhesion_mj_per_m2 = h.size,
+            EffectKind::RadiusOffset => effects.camera_radius_offset_mm = h.size,
+            EffectKind::RadiusScale => effects.camera_radius_scale = 1.0 + h.size,
+            EffectKind::DisplacementOffset => effects.proximity_offset_mm = h.size,
+            EffectKind::PressureOffset => {
+                // the manometer reads p + p0 and the controller regulates the reading
+                effects.manometer_offset_kpa = h.size;
+                pressures = pressures.iter().map(|p| p - h.size).collect();
+            }
+        }
+    }
+    s.effects = effects;
+    s.mechanics = MechanicsSource::Solve {
+        pressures_kpa: pressures,
+        modulus_factors: factors,
+        mesh_level: EFFECT_MESH_LEVEL,
+        steps: TRUTH_STEPS,
+        max_depth_mm: TRUTH_MAX_DEPTH_MM,
+    };
+    s
+}
+
+/// The truth's mechanics and how far its curves reach.
+pub struct Truth {
+    pub mechanics: Box<dyn MechanicsModel>,
+    /// Tube travel every truth curve reached (mm): a curve that stops converging near the
+    /// end of the travel (a soft or thin sample, a low pressure) is kept up to its last
+    /// converged step, as the tables keep theirs, and the simulated ramp stops there.
+    pub reached_travel_mm: f64,
+}
+
+impl std::fmt::Debug for Truth {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Truth")
+            .field("reached_travel_mm", &self.reached_travel_mm)
+            .finish_non_exhaustive()
+    }
+}
+
+/// The truth mechanics of a scenario (the expensive part: fem-core solves, each kept up to
+/// its last converged step, [`fem_core::solve_curve_partial`]).
+pub fn truth_mechanics(scenario: &Scenario) -> Result<Truth, String> {
+    if !matches!(scenario.mechanics, MechanicsSource::Solve { .. }) {
+        let mechanics =
+            hil_sim::mechanics_source::build_mechanics(scenario).map_err(|e| e.to_string())?;
+        return Ok(Truth {
+            mechanics,
+            reached_travel_mm: f64::INFINITY,
+        });
+    }
+    let mut curves = Vec::new();
+    let mut reached = f64::INFINITY;
+    for params in hil_sim::mechanics_source::solve_params(scenario) {
+        let (curve, _stop) = fem_core::solve_curve_partial(&params).map_err(|e| {
+            format!(
+                "fem-core solve at E2 = {:.4} kPa, p_air = {} kPa failed: {e}",
+                params.sample_modulus_kpa, params.pressure_kpa
+            )
+        })?;
+        reached = reached.min(curve.points.last().map_or(0.0, |q| q.h_mm));
+        curves.push(curve);
+    }
+    let mechanics = hil_sim::mechanics::CurveMechanics::new(&curves).map_err(|e| e.to_string())?;
+    if scenario.effects.needs_modulus_axis() && !mechanics.has_modulus_axis() {
+        return Err("the viscoelastic truth needs curves at several moduli".into());
+    }
+    Ok(Truth {
+        mechanics: Box::new(mechanics),
+        reached_travel_mm: reached,
+    })
+}
+
+/// Simulates the experiment with prebuilt mechanics of `truth_scenario(spec)`.
+pub fn simulate_with(spec: &SimSpec, scenario: &Scenario, truth: &Truth) -> Vec<Point> {
+    let mech = truth.mechanics.as_ref();
+    let cfg = &scenario.effects;
+    let mut rng = SimRng::stream(spec.seed, "diagnosis-noise");
+    let n = spec.noise;
+    let (white_a, white_u, tare_u, off_a, drift_u, drift_tau) =
+        (0.004 * n, 0.004 * n, 0.004 * n, 0.002 * n, 0.004 * n, 0.3);
+    let (white_load_n, tare_load_n) = (0.09e-3 * n, 0.03e-3 * n);
+    let dt = 1.0 / spec.fps;
+    let substeps = 10;
+    let mut out = Vec::new();
+    let offset = match spec.hidden {
+        Some(Hidden {
+            kind: EffectKind::PressureOffset,
+            size,
+        }) => size,
+        _ => 0.0,
+    };
+    for &p_set in &spec.pressures_kpa {
+        let p_true = p_set - offset;
+        for test in 0..spec.replicates {
+            let mut state = EffectState::default();
+            let tare = rng.normal(tare_u);
+            let a_off = rng.normal(off_a);
+            let load_tare = rng.normal(tare_load_n);
+            let mut drift = rng.normal(drift_u);
+            let decay = (-dt / drift_tau).exp();
+            let travel_mm = spec.max_travel_mm.min(truth.reached_travel_mm);
+            let frames = (travel_mm / spec.speed_mm_per_s * spec.fps).floor() as usize;
+            let mut h_prev = 0.0;
+            for k in 1..=frames {
+                let t = k as f64 * dt;
+                let h = spec.speed_mm_per_s * t;
+                // advance the hereditary memory in substeps
+                let mut e_eff = spec.modulus_kpa;
+                for j in 1..=substeps {
+                    let hj = h_prev + (h - h_prev) * j as f64 / substeps as f64;
+                    e_eff = state.effective_modulus_kpa(
+                        cfg,
+                        spec.modulus_kpa,
+                        hj,
+                        dt / substeps as f64,
+                    );
+                }
+                h_prev = h;
+                let cs = state.finish(cfg, mech.contact(h, p_true, e_eff));
+                drift = drift * decay + drift_u * (1.0 - decay * decay).sqrt() * rng.gaussian();
+                let a = cfg.camera_radius_mm(cs.a_mm);
+                if a <= 0.0 {
+                    continue;
+                }
+                out.push(Point {
+                    u_s_mm: cs.u_s_mm
+                        + cfg.proximity_error_mm(t)
+                        + tare
+                        + drift
+                        + rng.normal(white_u),
+                    a_mm: a + a_off + rng.normal(white_a),
+                    p_air_kpa: p_set,
+                    test: test as u32,
+                    load_n: Some(cs.load_n + load_tare + rng.normal(white_load_n)),
+                    t_s: Some(t),
+                    h_mm: Some(h),
+                });
+            }
+        }
+    }
+    out
+}
+
+/// Builds the truth and simulates (one call).
+pub fn simulate(spec: &SimSpec) -> Result<Vec<Point>, String> {
+    let scenario = truth_scenario(spec);
+    let truth = truth_mechanics(&scenario)?;
+    Ok(simulate_with(spec, &scenario, &truth))
+}
+
+/// Points as curve CSV text (one file, `test` column for replicates).
+pub fn to_curve_csv(points: &[Point], note: &str) -> Result<String, fit::curve_csv::CurveCsvError> {
+    use fit::curve_csv::{CurveCsv, CurveRow, Phase};
+    let curve = CurveCsv {
+        metadata: vec![("source".into(), note.to_string())],
+        rows: points
+            .iter()
+            .map(|p| CurveRow {
+                u_s_mm: p.u_s_mm,
+                a_mm: p.a_mm,
+                load_n: p.load_n,
+                p_air_kpa: Some(p.p_air_kpa),
+                t_s: p.t_s,
+                phase: Some(Phase::Load),
+                test: Some(p.test),
+                h_mm: p.h_mm,
+                volume_mm3: None,
+            })
+            .collect(),
+    };
+    fit::curve_csv::format_curve_csv(&curve)
+}

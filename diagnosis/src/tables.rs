@@ -1,0 +1,322 @@
+//! The effect tables the diagnosis reads: fem-core lookup tables over modulus x pressure with
+//! one varied effect axis each (sample thickness, friction, strain stiffening), at the mesh
+//! level and load steps of the mechanics the simulated bench uses for its truth, so that a
+//! mesh difference never shows up as structure. The baseline table is the slice of any of
+//! them at the axis' base value.
+//!
+//! Building them reuses fem-core's builder ([`fem_core::lut::build_lut`]) on the grids of
+//! [`effect_grids`]; [`sub_table`] cuts a one-slice table out of a multi-slice one so the
+//! host's fit ([`fit::LutModel`]) can use it unchanged.
+
+use std::path::{Path, PathBuf};
+
+use fem_core::CurveParams;
+use fem_core::lut::{EffectSelection, GridIndex, Lut, LutCurve, LutGrid, log_spaced};
+
+/// Mesh level of the shipped effect tables and of the simulated truth in the tests.
+pub const EFFECT_MESH_LEVEL: i32 = -2;
+/// Load steps per curve (to `EFFECT_MAX_DEPTH_MM`).
+pub const EFFECT_STEPS: usize = 20;
+/// Final tube travel of every curve.
+pub const EFFECT_MAX_DEPTH_MM: f64 = 2.0;
+/// Internal pressures of the effect tables.
+pub const EFFECT_PRESSURES_KPA: [f64; 2] = [6.0, 15.0];
+/// Internal pressures of the thickness table, whose base slice is the baseline: 1 kPa steps
+/// to +-2 kPa around the set points, so that the pressure-offset candidate reads the
+/// baseline at p_air - p0 inside the table. a(p_air) is far from linear there: continuing
+/// the 6-15 kPa chord to 4.5 kPa missed a direct solve by 0.019 mm RMS at 170 kPa, about
+/// the size of the 1.5 kPa effect itself (`tests/tests/diagnose_table_error.rs`).
+pub const BASE_PRESSURES_KPA: [f64; 10] = [4.0, 5.0, 6.0, 7.0, 8.0, 13.0, 14.0, 15.0, 16.0, 17.0];
+/// Sample thicknesses (mm) of the thickness table; the last is the paper's 7 mm baseline.
+pub const THICKNESS_AXIS_MM: [f64; 4] = [3.5, 4.5, 5.5, 7.0];
+/// Friction coefficients of the friction table (0 is the baseline). Frictional curves cost
+/// 15-100x a frictionless one (linear Newton convergence while slipping), so the friction
+/// table has two values and the moduli 46.4–681 kPa only.
+pub const FRICTION_AXIS: [f64; 2] = [0.0, 0.4];
+/// Yeoh c2/c1 ratios of the strain-stiffening table (0 is the neo-Hookean baseline). The
+/// Yeoh term grows with the square of the strain, so only soft samples (E2 below ~100 kPa,
+/// where the sample takes most of the travel) show it: the axis reaches 20.
+pub const STIFFENING_AXIS: [f64; 5] = [0.0, 2.0, 5.0, 10.0, 20.0];
+
+/// Which effect axis a table varies.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum EffectAxis {
+    Thickness,
+    Friction,
+    Stiffening,
+}
+
+impl EffectAxis {
+    pub const ALL: [EffectAxis; 3] = [Self::Thickness, Self::Friction, Self::Stiffening];
+
+    /// File name of the shipped table.
+    pub fn file_name(self) -> &'static str {
+        match self {
+            Self::Thickness => "effects-thickness.lut",
+            Self::Friction => "effects-friction.lut",
+            Self::Stiffening => "effects-stiffening.lut",
+        }
+    }
+
+    /// The axis values a table built by [`effect_grids`] holds.
+    pub fn axis_values(self) -> Vec<f64> {
+        match self {
+            Self::Thickness => THICKNESS_AXIS_MM.to_vec(),
+            Self::Friction => FRICTION_AXIS.to_vec(),
+            Self::Stiffening => STIFFENING_AXIS.to_vec(),
+        }
+    }
+
+    /// The values of this axis in a table's grid.
+    pub fn values_in(self, grid: &LutGrid) -> &[f64] {
+        match self {
+            Self::Thickness => &grid.effects.sample_thickness_mm,
+            Self::Friction => &grid.effects.friction,
+            Self::Stiffening => &grid.effects.stiffening,
+        }
+    }
+
+    /// The baseline value of the axis (what the host's fit assumes).
+    pub fn base_value(self) -> f64 {
+        let d = CurveParams::default();
+        match self {
+            Self::Thickness => d.sample_thickness_mm,
+            Self::Friction => d.friction,
+            Self::Stiffening => d.sample_stiffening,
+        }
+    }
+
+    /// An effect selection at `value` of this axis (other axes single-valued).
+    pub fn select(self, value: f64) -> EffectSelection {
+        match self {
+            Self::Thickness => EffectSelection {
+                sample_thickness_mm: Some(value),
+                ..EffectSelection::default()
+            },
+            Self::Friction => EffectSelection {
+                friction: Some(value),
+                ..EffectSelection::default()
+            },
+            Self::Stiffening => EffectSelection {
+                stiffening: Some(value),
+                ..EffectSelection::default()
+            },
+        }
+    }
+}
+
+/// The base curve parameters of every effect table (and of the simulated truth).
+pub fn effect_base_params() -> CurveParams {
+    CurveParams {
+        max_depth_mm: EFFECT_MAX_DEPTH_MM,
+        steps: EFFECT_STEPS,
+        mesh_level: EFFECT_MESH_LEVEL,
+        ..CurveParams::default()
+    }
+}
+
+/// The grid of the table that varies `axis`: E2 10–1000 kPa (13 log-spaced, as the default
+/// table; friction: 46.4–681 kPa) x p_air 6 and 15 kPa (thickness: [`BASE_PRESSURES_KPA`])
+/// x the axis values.
+pub fn effect_grid(axis: EffectAxis) -> LutGrid {
+    let mut grid = LutGrid::with_axes(
+        &format!("effects-{}", axis_name(axis)),
+        effect_base_params(),
+        log_spaced(10.0, 1000.0, 13),
+        match axis {
+            EffectAxis::Thickness => BASE_PRESSURES_KPA.to_vec(),
+            _ => EFFECT_PRESSURES_KPA.to_vec(),
+        },
+    );
+    let values = axis.axis_values();
+    match axis {
+        EffectAxis::Thickness => {
+            grid.base.sample_thickness_mm = values[0];
+            grid.effects.sample_thickness_mm = values;
+        }
+        EffectAxis::Friction => {
+            grid.base.friction = values[0];
+            grid.effects.friction = values;
+            grid.modulus_kpa = grid.modulus_kpa[4..=10].to_vec();
+            grid.base.sample_modulus_kpa = grid.modulus_kpa[0];
+        }
+        EffectAxis::Stiffening => {
+            grid.base.sample_stiffening = values[0];
+            grid.effects.stiffening = values;
+        }
+    }
+    grid
+}
+
+fn axis_name(axis: EffectAxis) -> &'static str {
+    match axis {
+        EffectAxis::Thickness => "thickness",
+        EffectAxis::Friction => "friction",
+        EffectAxis::Stiffening => "stiffening",
+    }
+}
+
+/// The grids of all shipped effect tables.
+pub fn effect_grids() -> Vec<(EffectAxis, LutGrid)> {
+    EffectAxis::ALL
+        .iter()
+        .map(|&a| (a, effect_grid(a)))
+        .collect()
+}
+
+/// Directory of the shipped tables (fem-core/data).
+pub fn shipped_tables_dir() -> PathBuf {
+    fem_core::shipped::data_dir()
+}
+
+/// Builds the table of `axis` with fem-core's solver (in parallel on the rayon pool) and
+/// writes it to `out`; returns (sha256, failed curves). `on_curve` reports each curve.
+pub fn build_effect_table(
+    axis: EffectAxis,
+    out: &Path,
+    on_curve: &(dyn Fn(&fem_core::lut::CurveReport) + Sync),
+) -> Result<(String, usize), fem_core::lut::LutError> {
+    let grid = effect_grid(axis);
+    let description = fem_core::lut::fem_solver_description(grid.base.mesh_level);
+    // curves that stop converging near the end of the travel (thin, soft samples) are kept
+    // up to their last converged step (fem-core records them as truncated)
+    let solver = |p: &CurveParams| fem_core::lut::solve_curve_for_table(p, &|_, _| {});
+    let lut = fem_core::lut::build_lut(&grid, None, &solver, &description, on_curve)?;
+    let hash = fem_core::lut::write_lut(out, &lut)?;
+    Ok((hash, lut.failures().count()))
+}
+
+/// Why a table could not be used.
+#[derive(Debug, thiserror::Error)]
+pub enum TableError {
+    #[error("effect table {path}: {reason}")]
+    Read { path: String, reason: String },
+    #[error("effect table {path}: varies no effect axis (thickness, friction or stiffening)")]
+    NoAxis { path: String },
+    #[error("effect table {path}: {reason}")]
+    Slice { path: String, reason: String },
+}
+
+/// One loaded effect table.
+#[derive(Debug, Clone)]
+pub struct EffectTable {
+    pub path: String,
+    pub sha256: String,
+    pub axis: EffectAxis,
+    pub lut: Lut,
+}
+
+/// Reads an effect table and finds its varied axis.
+pub fn read_effect_table(path: &Path) -> Result<EffectTable, TableError> {
+    let name = path.display().to_string();
+    let file = fem_core::lut::read_lut(path).map_err(|e| TableError::Read {
+        path: name.clone(),
+        reason: e.to_string(),
+    })?;
+    let axis = EffectAxis::ALL
+        .into_iter()
+        .find(|a| a.values_in(&file.lut.grid).len() > 1)
+        .ok_or(TableError::NoAxis { path: name.clone() })?;
+    Ok(EffectTable {
+        path: name,
+        sha256: file.sha256,
+        axis,
+        lut: file.lut,
+    })
+}
+
+/// The shipped effect tables (`fem-core/data/effects-*.lut`) and the baseline: the base
+/// slice of the first (the thickness table), which has the effect tables' mesh and steps.
+pub fn shipped_tables() -> Result<(Lut, Vec<EffectTable>), TableError> {
+    let effects = EffectAxis::ALL
+        .iter()
+        .map(|a| read_effect_table(&shipped_tables_dir().join(a.file_name())))
+        .collect::<Result<Vec<_>, _>>()?;
+    let t = effects.first().ok_or(TableError::Read {
+        path: shipped_tables_dir().display().to_string(),
+        reason: "no effect tables".into(),
+    })?;
+    let base = sub_table(&t.lut, &t.axis.select(t.axis.base_value())).map_err(|reason| {
+        TableError::Slice {
+            path: t.path.clone(),
+            reason,
+        }
+    })?;
+    Ok((base, effects))
+}
+
+/// A complete one-slice table cut out of `lut` at the effect selection `sel` (every other
+/// axis single-valued), with curves re-indexed; usable by the host's fit.
+pub fn sub_table(lut: &Lut, sel: &EffectSelection) -> Result<Lut, String> {
+    let (t, f, m, s) = lut.grid.resolve_effects(sel).map_err(|e| e.to_string())?;
+    let mut grid = lut.grid.clone();
+    grid.effects.sample_thickness_mm = vec![lut.grid.effects.sample_thickness_mm[t]];
+    grid.effects.friction = vec![lut.grid.effects.friction[f]];
+    grid.effects.material = vec![lut.grid.effects.material[m]];
+    grid.effects.stiffening = vec![lut.grid.effects.stiffening[s]];
+    grid.base.sample_thickness_mm = grid.effects.sample_thickness_mm[0];
+    grid.base.friction = grid.effects.friction[0];
+    grid.base.material = grid.effects.material[0];
+    grid.base.sample_stiffening = grid.effects.stiffening[0];
+    let mut curves = Vec::new();
+    for p in 0..grid.pressure_kpa.len() {
+        for e in 0..grid.modulus_kpa.len() {
+            let old = lut.grid.flat_index(GridIndex {
+                stiffening: s,
+                material: m,
+                friction: f,
+                thickness: t,
+                pressure: p,
+                modulus: e,
+            });
+            let new = grid.flat_index(GridIndex {
+                stiffening: 0,
+                material: 0,
+                friction: 0,
+                thickness: 0,
+                pressure: p,
+                modulus: e,
+            });
+            let c = lut
+                .curve(old)
+                .ok_or_else(|| format!("curve {old} is missing (a shard?)"))?;
+            curves.push(LutCurve {
+                index: new,
+                ..c.clone()
+            });
+        }
+    }
+    curves.sort_by_key(|c| c.index);
+    let out = Lut {
+        grid,
+        fem_core_version: lut.fem_core_version.clone(),
+        solver: lut.solver.clone(),
+        shard: None,
+        curves,
+    };
+    out.validate()?;
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn effect_grids_vary_one_axis_with_the_baseline_on_it() {
+        for (axis, grid) in effect_grids() {
+            grid.validate().unwrap();
+            assert_eq!(axis.values_in(&grid).len(), axis.axis_values().len());
+            assert!(axis.values_in(&grid).contains(&axis.base_value()));
+            assert_eq!(grid.base.mesh_level, EFFECT_MESH_LEVEL);
+            for p in EFFECT_PRESSURES_KPA {
+                assert!(grid.pressure_kpa.contains(&p));
+            }
+            assert_eq!(
+                grid.curve_count(),
+                grid.modulus_kpa.len() * grid.pressure_kpa.len() * axis.axis_values().len()
+            );
+        }
+    }
+}

@@ -1,0 +1,185 @@
+//! ELF -> UF2 for the RP2040, checked field by field against the UF2 specification
+//! (github.com/microsoft/uf2, README "File format"), with the offsets and magic numbers
+//! written out here independently of the implementation's constants.
+
+#![allow(clippy::unwrap_used)] // tests may unwrap: a panic fails the test with its message
+
+use usb::elf_image::{ElfError, LoadSegment, load_segments};
+use usb::uf2::{FlashImage, Uf2Error, crc32_mpeg2, parse_uf2};
+
+/// A minimal ELF32 little-endian ARM executable with the given program headers
+/// (p_type, p_paddr, p_vaddr, data, p_memsz).
+fn elf(phdrs: &[(u32, u32, u32, Vec<u8>, u32)]) -> Vec<u8> {
+    let phoff = 52u32;
+    let data_start = phoff + 32 * phdrs.len() as u32;
+    let mut out = vec![0u8; data_start as usize];
+    out[..4].copy_from_slice(b"\x7fELF");
+    out[4] = 1; // ELFCLASS32
+    out[5] = 1; // ELFDATA2LSB
+    out[6] = 1; // EV_CURRENT
+    out[16..18].copy_from_slice(&2u16.to_le_bytes()); // ET_EXEC
+    out[18..20].copy_from_slice(&40u16.to_le_bytes()); // EM_ARM
+    out[20..24].copy_from_slice(&1u32.to_le_bytes());
+    out[28..32].copy_from_slice(&phoff.to_le_bytes());
+    out[40..42].copy_from_slice(&52u16.to_le_bytes()); // e_ehsize
+    out[42..44].copy_from_slice(&32u16.to_le_bytes()); // e_phentsize
+    out[44..46].copy_from_slice(&(phdrs.len() as u16).to_le_bytes());
+    let mut offset = data_start;
+    for (i, (ty, paddr, vaddr, data, memsz)) in phdrs.iter().enumerate() {
+        let ph = phoff as usize + 32 * i;
+        let words = [*ty, offset, *vaddr, *paddr, data.len() as u32, *memsz, 5, 4];
+        for (k, w) in words.iter().enumerate() {
+            out[ph + 4 * k..ph + 4 * k + 4].copy_from_slice(&w.to_le_bytes());
+        }
+        offset += data.len() as u32;
+    }
+    for (_, _, _, data, _) in phdrs {
+        out.extend_from_slice(data);
+    }
+    out
+}
+
+fn boot2() -> Vec<u8> {
+    let mut b: Vec<u8> = (0..252u32).map(|i| (i * 31 % 251) as u8).collect();
+    let crc = crc32_mpeg2(&b);
+    b.extend_from_slice(&crc.to_le_bytes());
+    b
+}
+
+fn le(b: &[u8], off: usize) -> u32 {
+    u32::from_le_bytes([b[off], b[off + 1], b[off + 2], b[off + 3]])
+}
+
+#[test]
+fn crc32_mpeg2_check_value() {
+    // CRC catalogue check value of CRC-32/MPEG-2 for "123456789".
+    assert_eq!(crc32_mpeg2(b"123456789"), 0x0376_E6E7);
+}
+
+#[test]
+fn elf_segments_become_spec_conformant_uf2_blocks() {
+    let text: Vec<u8> = boot2()
+        .into_iter()
+        .chain((0..600u32).map(|i| i as u8))
+        .collect();
+    let data_init: Vec<u8> = vec![0xAB; 40];
+    let image_elf = elf(&[
+        (1, 0x1000_0000, 0x1000_0000, text.clone(), text.len() as u32),
+        // .data: runs from RAM (vaddr) but is stored in flash after .text (paddr = LMA).
+        (1, 0x1000_2010, 0x2000_0000, data_init.clone(), 40),
+        // .bss: no file bytes, nothing to flash.
+        (1, 0x2000_0100, 0x2000_0100, vec![], 0x400),
+        // PT_NOTE: ignored.
+        (4, 0x1000_3000, 0x1000_3000, vec![1, 2, 3, 4], 4),
+    ]);
+    let segments = load_segments(&image_elf).unwrap();
+    assert_eq!(
+        segments,
+        vec![
+            LoadSegment {
+                paddr: 0x1000_0000,
+                data: text.clone()
+            },
+            LoadSegment {
+                paddr: 0x1000_2010,
+                data: data_init.clone()
+            },
+        ]
+    );
+    let image = FlashImage::from_segments(&segments).unwrap();
+    assert!(image.boot2_valid());
+    let uf2 = image.to_uf2();
+    // text = 856 bytes -> pages 0x10000000, 0x100, 0x200, 0x300; data -> page 0x10002000.
+    let want_addrs = [
+        0x1000_0000u32,
+        0x1000_0100,
+        0x1000_0200,
+        0x1000_0300,
+        0x1000_2000,
+    ];
+    assert_eq!(uf2.len(), 512 * want_addrs.len());
+    for (i, block) in uf2.chunks(512).enumerate() {
+        assert_eq!(le(block, 0), 0x0A32_4655, "magicStart0");
+        assert_eq!(le(block, 4), 0x9E5D_5157, "magicStart1");
+        assert_eq!(le(block, 8), 0x0000_2000, "flags: familyID present only");
+        assert_eq!(le(block, 12), want_addrs[i], "targetAddr");
+        assert_eq!(le(block, 16), 256, "payloadSize");
+        assert_eq!(le(block, 20), i as u32, "blockNo");
+        assert_eq!(le(block, 24), want_addrs.len() as u32, "numBlocks");
+        assert_eq!(le(block, 28), 0xE48B_FF56, "RP2040 family ID");
+        assert_eq!(le(block, 508), 0x0AB1_6F30, "magicEnd");
+        assert!(
+            block[32 + 256..508].iter().all(|&b| b == 0),
+            "padding after payload"
+        );
+    }
+    // Payload bytes land at their addresses; unused bytes of a page are 0x00.
+    let payload = |i: usize| &uf2[i * 512 + 32..i * 512 + 32 + 256];
+    assert_eq!(payload(0), &text[..256]);
+    assert_eq!(&payload(3)[..856 - 768], &text[768..]);
+    assert!(payload(3)[856 - 768..].iter().all(|&b| b == 0));
+    assert_eq!(&payload(4)[0x10..0x10 + 40], &data_init[..]);
+    assert!(payload(4)[..0x10].iter().all(|&b| b == 0));
+    // Our own parser agrees.
+    let blocks = parse_uf2(&uf2).unwrap();
+    assert_eq!(blocks.len(), 5);
+    assert_eq!(blocks[4].payload, payload(4));
+}
+
+#[test]
+fn bad_inputs_are_clear_errors() {
+    assert_eq!(load_segments(b"MZ\x90\x00"), Err(ElfError::BadMagic));
+    let mut e64 = elf(&[]);
+    e64[4] = 2;
+    assert_eq!(load_segments(&e64), Err(ElfError::Class(2)));
+    let mut riscv = elf(&[]);
+    riscv[18] = 243;
+    assert_eq!(load_segments(&riscv), Err(ElfError::Machine(243)));
+    // A segment whose bytes run past the end of the file.
+    let mut cut = elf(&[(1, 0x1000_0000, 0x1000_0000, vec![1; 64], 64)]);
+    cut.truncate(cut.len() - 10);
+    assert!(matches!(
+        load_segments(&cut),
+        Err(ElfError::SegmentOutOfFile { index: 0, .. })
+    ));
+    // RAM-only image and overlapping segments.
+    let ram = [LoadSegment {
+        paddr: 0x2000_0000,
+        data: vec![0; 4],
+    }];
+    assert_eq!(
+        FlashImage::from_segments(&ram),
+        Err(Uf2Error::NotInFlash {
+            paddr: 0x2000_0000,
+            len: 4
+        })
+    );
+    let overlap = [
+        LoadSegment {
+            paddr: 0x1000_0000,
+            data: vec![0; 300],
+        },
+        LoadSegment {
+            paddr: 0x1000_0100,
+            data: vec![0; 4],
+        },
+    ];
+    assert_eq!(
+        FlashImage::from_segments(&overlap),
+        Err(Uf2Error::Overlap(0x1000_0100))
+    );
+    // An image without boot2 is flagged.
+    let no_boot2 = FlashImage::from_segments(&[LoadSegment {
+        paddr: 0x1000_0100,
+        data: vec![1; 4],
+    }])
+    .unwrap();
+    assert!(!no_boot2.boot2_valid());
+    // UF2 parsing rejects a block with a bad end magic.
+    let mut uf2 = no_boot2.to_uf2();
+    uf2[508] ^= 1;
+    assert!(matches!(
+        parse_uf2(&uf2),
+        Err(Uf2Error::BadBlock { index: 0, .. })
+    ));
+}

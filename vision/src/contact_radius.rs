@@ -1,0 +1,960 @@
+//! Contact radius from a camera frame and a no-contact reference frame.
+//!
+//! Method (contrast-relative, no fixed grey-level threshold):
+//! 1. Normalised difference `n = (I - R) / R` per pixel: the LED's vignetting and
+//!    illumination gradient multiply both frames, so `n` is flat where contact changes the
+//!    reflectance by a constant factor. Saturated pixels and the apex mirror (much brighter
+//!    than the reference's median) are masked.
+//! 2. Detection on 4x4 blocks: robust median/MAD of `n`, candidates beyond 5 sigma, polarity
+//!    by majority, re-threshold at half the candidates' median level, largest 4-connected
+//!    component with holes (the mirror) filled. Nothing found = "no contact".
+//!    This gives a coarse centre and radius (about +-2 px).
+//! 3. Area moment in a band: with the contact level `in(x, y)` and the background level
+//!    `out(x, y)` fitted as planes (robust least squares) in rings just inside and outside a
+//!    band of +-w px around the current edge model, each band pixel contributes the fraction
+//!    `f = (n - out) / (in - out)`; the contact area is `A = N_inner + sum_band f`. A blurred
+//!    disc keeps the area `pi r^2` of the sharp one (convolution preserves the integral), so
+//!    `r = sqrt(A / pi)` has no blur or contrast bias, and pixel noise averages over the band.
+//! 4. Shape: the same sum per angular sector gives a polar radius per sector
+//!    (`A_s = r_s^2 dtheta / 2`); an algebraic ellipse fit of those edge points gives the
+//!    centre, axes and angle. The band follows the fitted ellipse in a second pass.
+//!    Eccentricity = sin(tilt) for a circular contact seen obliquely.
+
+use super::ellipse_fit::{Ellipse, fit_ellipse};
+use super::linear_solve::solve;
+use crate::GrayImage;
+
+/// Tunable parameters; the defaults are what the accuracy tests use.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ContactRadiusConfig {
+    /// Block-level detection threshold, robust standard deviations.
+    pub detect_sigma: f64,
+    /// Smallest contact radius reported; smaller blobs are "no contact".
+    pub min_radius_px: f64,
+    /// Half width of the band around the edge summed for the area. It must cover the blur:
+    /// the area lost in the tails beyond 8 px of a sigma = 2.5 px edge is ~0.002 px of
+    /// radius. Wider bands add noise: every band pixel carries the pixel noise, and the
+    /// band's f ~ 1 half scales with any error of the fitted contact level.
+    pub band_half_width_px: f64,
+    /// Width of the rings inside and outside the band where the levels are fitted (wide,
+    /// because the level error is multiplied by the band's pixel count).
+    pub level_ring_px: f64,
+    /// Angular sectors for the edge points of the ellipse fit.
+    pub sectors: usize,
+    /// Pixels at or above this grey level (in either frame) are ignored.
+    pub saturation_level: u8,
+    /// Reference pixels brighter than this multiple of the reference's median are treated
+    /// as the apex mirror and ignored.
+    pub mirror_ratio: f64,
+    /// Eccentricity above which the contact is flagged as tilted (0.35 = 20 degrees).
+    pub tilt_eccentricity: f64,
+}
+
+impl Default for ContactRadiusConfig {
+    fn default() -> Self {
+        Self {
+            detect_sigma: 5.0,
+            min_radius_px: 10.0,
+            band_half_width_px: 8.0,
+            level_ring_px: 12.0,
+            sectors: 32,
+            saturation_level: 250,
+            mirror_ratio: 1.6,
+            tilt_eccentricity: 0.35,
+        }
+    }
+}
+
+/// The contact disc found in a frame.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct ContactDisc {
+    /// Radius of the circle with the contact's area, px.
+    pub radius_px: f64,
+    /// Standard error of `radius_px` predicted from the measured pixel noise, px.
+    pub radius_sigma_px: f64,
+    pub center_px: [f64; 2],
+    /// Fitted shape, scaled to the measured area.
+    pub ellipse: Ellipse,
+    pub eccentricity: f64,
+    /// Tilt implied by the eccentricity, `asin(e)`, degrees.
+    pub tilt_deg: f64,
+    pub tilted: bool,
+    /// Mean relative contrast `(I - R) / R` inside minus outside the edge (signed).
+    pub contrast: f64,
+    /// |contrast| / per-pixel noise of the normalised difference.
+    pub edge_snr: f64,
+    /// RMS of the sector radii about the fitted ellipse, px.
+    pub fit_rms_px: f64,
+    /// True when the disc's band runs off the image (radius from the visible sectors).
+    pub clipped: bool,
+    /// Band passes used (a second one when the first edge model was more than 2 px off).
+    pub passes: usize,
+}
+
+/// Result for one frame. `contact` is false when no contact disc is found or its edge
+/// cannot be measured (within a few px of the apex mirror's rim, or a measurement that
+/// disagrees with the detection); `quality` is 0 then, else in (0, 1]:
+/// `1 / (1 + (radius_sigma_px / 0.1)^2)` (0.5 when the predicted error equals the 0.1 px
+/// target) times `1 / (1 + max(0, chi - 2)^2)` where chi is the sector radii's RMS about
+/// the ellipse over their predicted noise (an irregular, non-elliptical edge lowers it),
+/// times the visible fraction of the band.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct ContactRadius {
+    pub contact: bool,
+    pub quality: f64,
+    pub disc: Option<ContactDisc>,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum VisionError {
+    #[error("frame is {fw}x{fh} but the reference is {rw}x{rh}")]
+    SizeMismatch {
+        fw: usize,
+        fh: usize,
+        rw: usize,
+        rh: usize,
+    },
+    #[error("frame of {w}x{h} is too small (need at least 32x32)")]
+    TooSmall { w: usize, h: usize },
+}
+
+const BLOCK: usize = 4;
+
+/// Narrowest inner level ring next to the apex mirror, px (a 3 px ring around a 50 px
+/// contact still holds ~900 pixels for the level plane).
+const MIN_LEVEL_RING_PX: f64 = 3.0;
+/// Narrowest band next to the mirror, as a fraction of the configured half width: 4 px is
+/// 1.6 blur sigmas at the default 2.5 px; the blur tails cut off inside and outside a
+/// straight edge cancel, so the area stays unbiased to first order.
+const MIN_BAND_FRACTION: f64 = 0.5;
+/// A measured disc must agree with the block-level detection (about +-2 px): its radius
+/// within this fraction of the detected radius plus `DETECTION_SLACK_PX`, its centre
+/// within the same distance. A diverged edge model (a wrong level plane feeding a wild
+/// ellipse fit) fails this and the frame reads "no measurable contact".
+const DETECTION_AGREEMENT: f64 = 0.25;
+const DETECTION_SLACK_PX: f64 = 8.0;
+
+/// Per-block sums and maxima of an image (4x4 blocks; the right/bottom remainder is left
+/// out of detection only).
+#[derive(Debug, Clone)]
+struct Blocks {
+    bw: usize,
+    bh: usize,
+    sum: Vec<u32>,
+    max: Vec<u8>,
+}
+
+impl Blocks {
+    fn of(img: &GrayImage) -> Self {
+        let (w, bw, bh) = (img.width(), img.width() / BLOCK, img.height() / BLOCK);
+        let mut sum = vec![0u32; bw * bh];
+        let mut max = vec![0u8; bw * bh];
+        let px = img.pixels();
+        // Column sums and maxima over the block's rows first (contiguous, vectorisable),
+        // then per block across its columns.
+        let mut col_sum = vec![0u16; bw * BLOCK];
+        let mut col_max = vec![0u8; bw * BLOCK];
+        for by in 0..bh {
+            col_sum.fill(0);
+            col_max.fill(0);
+            for r in 0..BLOCK {
+                let row = &px[(by * BLOCK + r) * w..][..bw * BLOCK];
+                for ((s, m), &v) in col_sum.iter_mut().zip(col_max.iter_mut()).zip(row) {
+                    *s += u16::from(v);
+                    *m = (*m).max(v);
+                }
+            }
+            let (s_row, m_row) = (
+                &mut sum[by * bw..(by + 1) * bw],
+                &mut max[by * bw..(by + 1) * bw],
+            );
+            for (((s, m), cs), cm) in s_row
+                .iter_mut()
+                .zip(m_row.iter_mut())
+                .zip(col_sum.chunks_exact(BLOCK))
+                .zip(col_max.chunks_exact(BLOCK))
+            {
+                *s = cs.iter().map(|&v| u32::from(v)).sum();
+                *m = cm.iter().copied().fold(0, u8::max);
+            }
+        }
+        Self { bw, bh, sum, max }
+    }
+}
+
+/// A no-contact reference prepared once for many frames.
+#[derive(Debug, Clone)]
+pub struct ContactRadiusEstimator {
+    reference: GrayImage,
+    blocks: Blocks,
+    /// Pixels of the reference at or above this level are the mirror.
+    mirror_level: f64,
+    /// The mirror's disc with a margin for its soft rim (centre, radius^2), if any:
+    /// masked so its halo does not leak into the fitted levels.
+    mirror_disc: Option<([f64; 2], f64)>,
+    /// `1 / max(R, 4)` per pixel, NaN where the reference is saturated or the mirror: the
+    /// per-pixel normalisation and reference mask, computed once.
+    inv_reference: Vec<f32>,
+    config: ContactRadiusConfig,
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    let mid = v.len() / 2;
+    let (_, m, _) = v.select_nth_unstable_by(mid, f64::total_cmp);
+    *m
+}
+
+/// Robust standard deviation, 1.4826 * MAD (consistent for Gaussian noise).
+fn robust_sigma(v: &mut [f64], center: f64) -> f64 {
+    for x in v.iter_mut() {
+        *x = (*x - center).abs();
+    }
+    1.4826 * median(v)
+}
+
+/// Fast atan2 (max error about 1e-5 rad; only used to bin pixels into sectors).
+fn fast_atan2(y: f64, x: f64) -> f64 {
+    let (ax, ay) = (x.abs(), y.abs());
+    let (mn, mx) = if ax < ay { (ax, ay) } else { (ay, ax) };
+    if mx == 0.0 {
+        return 0.0;
+    }
+    let a = mn / mx;
+    let s = a * a;
+    let mut r = ((-0.046_496_474_9 * s + 0.159_314_22) * s - 0.327_622_764) * s * a + a;
+    if ay > ax {
+        r = std::f64::consts::FRAC_PI_2 - r;
+    }
+    if x < 0.0 {
+        r = std::f64::consts::PI - r;
+    }
+    if y < 0.0 { -r } else { r }
+}
+
+/// Sector of direction (dx, dy) among 32 equal sectors of `atan2(dy, dx) + pi`, without a
+/// division or an arctangent: octant by signs and |dx| vs |dy|, then three comparisons
+/// with tan(k pi / 16).
+fn sector32(dx: f64, dy: f64) -> usize {
+    const T1: f64 = 0.198_912_367_379_658; // tan(pi/16)
+    const T2: f64 = 0.414_213_562_373_095; // tan(2 pi/16)
+    const T3: f64 = 0.668_178_637_919_299; // tan(3 pi/16)
+    let (ax, ay) = (dx.abs(), dy.abs());
+    let (mn, mx) = if ax < ay { (ax, ay) } else { (ay, ax) };
+    let sub = usize::from(mn > mx * T1) + usize::from(mn > mx * T2) + usize::from(mn > mx * T3);
+    // Index of the angle within its quadrant (0..8 steps of pi/16 from the +-x axis).
+    let q = if ay > ax { 7 - sub } else { sub };
+    match (dx >= 0.0, dy >= 0.0) {
+        (true, true) => 16 + q,
+        (false, true) => 31 - q,
+        (false, false) => q,
+        (true, false) => 15 - q,
+    }
+}
+
+/// A plane `a0 + a1 x + a2 y` fitted robustly (least squares, then again without
+/// residuals beyond 4 robust sigma); also returns that sigma.
+fn fit_plane(samples: &[[f64; 3]]) -> Option<([f64; 3], f64)> {
+    if samples.len() < 12 {
+        return None;
+    }
+    let lsq = |keep: &dyn Fn(&[f64; 3]) -> bool| -> Option<[f64; 3]> {
+        // Normal equations of [1 x y]: the six distinct sums.
+        let (mut n, mut sx, mut sy, mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+        let (mut sz, mut sxz, mut syz) = (0.0, 0.0, 0.0);
+        for s in samples.iter().filter(|s| keep(s)) {
+            let [x, y, z] = *s;
+            n += 1.0;
+            sx += x;
+            sy += y;
+            sxx += x * x;
+            sxy += x * y;
+            syy += y * y;
+            sz += z;
+            sxz += x * z;
+            syz += y * z;
+        }
+        solve(
+            [[n, sx, sy], [sx, sxx, sxy], [sy, sxy, syy]],
+            [sz, sxz, syz],
+        )
+    };
+    let p = lsq(&|_| true)?;
+    let eval = |p: &[f64; 3], s: &[f64; 3]| s[2] - (p[0] + p[1] * s[0] + p[2] * s[1]);
+    // Robust scale from at most ~2000 residuals.
+    let stride = (samples.len() / 2000).max(1);
+    let mut res: Vec<f64> = samples
+        .iter()
+        .step_by(stride)
+        .map(|s| eval(&p, s))
+        .collect();
+    let sigma = robust_sigma(&mut res, 0.0).max(1e-9);
+    let p2 = lsq(&|s| eval(&p, s).abs() <= 4.0 * sigma).unwrap_or(p);
+    Some((p2, sigma))
+}
+
+/// Coarse detection result.
+#[derive(Debug, Clone, Copy)]
+struct Coarse {
+    center: [f64; 2],
+    radius: f64,
+    /// The detected blocks reach the image's edge: the disc may be clipped, and then its
+    /// visible part's centre and radius are not the disc's.
+    at_image_edge: bool,
+}
+
+/// Sums from one band pass.
+#[derive(Debug, Clone)]
+struct BandPass {
+    radius: f64,
+    radius_sigma: f64,
+    contrast: f64,
+    edge_snr: f64,
+    /// Sector edge points (only sectors whose band is entirely inside the image).
+    points: Vec<[f64; 2]>,
+    point_sigma: f64,
+    visible_fraction: f64,
+}
+
+impl ContactRadiusEstimator {
+    pub fn new(reference: GrayImage, config: ContactRadiusConfig) -> Result<Self, VisionError> {
+        let (w, h) = (reference.width(), reference.height());
+        if w < 32 || h < 32 {
+            return Err(VisionError::TooSmall { w, h });
+        }
+        let blocks = Blocks::of(&reference);
+        let mut means: Vec<f64> = blocks
+            .sum
+            .iter()
+            .zip(&blocks.max)
+            .filter(|(_, m)| **m < config.saturation_level)
+            .map(|(s, _)| f64::from(*s) / (BLOCK * BLOCK) as f64)
+            .collect();
+        let mirror_level = config.mirror_ratio * median(&mut means).max(1.0);
+        let mirror_disc = mirror_disc(
+            &reference,
+            mirror_level.min(f64::from(config.saturation_level)),
+        );
+        let sat = f64::from(config.saturation_level);
+        let w = reference.width();
+        let mirror_limit = mirror_level.min(sat);
+        // 256-entry table: one lookup per pixel instead of a division.
+        let table: Vec<f32> = (0..=255u8)
+            .map(|v| {
+                let rv = f64::from(v);
+                if rv >= mirror_limit {
+                    f32::NAN
+                } else {
+                    (1.0 / rv.max(4.0)) as f32
+                }
+            })
+            .collect();
+        let mut inv_reference: Vec<f32> = reference
+            .pixels()
+            .iter()
+            .map(|&v| table[usize::from(v)])
+            .collect();
+        if let Some((mc, r2)) = mirror_disc {
+            // Mask the mirror's disc (with its rim margin) row by row.
+            let r = r2.sqrt();
+            let h = reference.height();
+            let y0 = (mc[1] - r).floor().max(0.0) as usize;
+            let y1 = ((mc[1] + r).ceil().max(0.0) as usize).min(h.saturating_sub(1));
+            for y in y0..=y1 {
+                let dy2 = (y as f64 - mc[1]).powi(2);
+                if dy2 >= r2 {
+                    continue;
+                }
+                let half = (r2 - dy2).sqrt();
+                let xa = (mc[0] - half).ceil().max(0.0) as usize;
+                let xb = ((mc[0] + half).floor().max(0.0) as usize).min(w.saturating_sub(1));
+                if xa <= xb {
+                    inv_reference[y * w + xa..=y * w + xb].fill(f32::NAN);
+                }
+            }
+        }
+        Ok(Self {
+            reference,
+            blocks,
+            mirror_level,
+            mirror_disc,
+            inv_reference,
+            config,
+        })
+    }
+
+    /// The apex mirror found in the reference and masked: centre and radius (px, including
+    /// the 4 px rim margin).
+    pub fn mirror_center_radius_px(&self) -> Option<([f64; 2], f64)> {
+        self.mirror_disc.map(|(c, r2)| (c, r2.sqrt()))
+    }
+
+    pub fn reference(&self) -> &GrayImage {
+        &self.reference
+    }
+
+    pub fn config(&self) -> &ContactRadiusConfig {
+        &self.config
+    }
+
+    /// Measures the contact in `frame`.
+    pub fn measure(&self, frame: &GrayImage) -> Result<ContactRadius, VisionError> {
+        let r = &self.reference;
+        if frame.width() != r.width() || frame.height() != r.height() {
+            return Err(VisionError::SizeMismatch {
+                fw: frame.width(),
+                fh: frame.height(),
+                rw: r.width(),
+                rh: r.height(),
+            });
+        }
+        let none = ContactRadius {
+            contact: false,
+            quality: 0.0,
+            disc: None,
+        };
+        let Some(coarse) = self.detect(frame) else {
+            return Ok(none);
+        };
+        let mut model = Ellipse::circle(coarse.center, coarse.radius);
+        let mut last: Option<(BandPass, Ellipse)> = None;
+        // The band sum is exact while the true edge lies well inside the band (its blur
+        // tail beyond 7 px of a 2.5 px blur holds < 1e-3 px of radius), so another pass
+        // around the fitted shape is needed only when the shape moved by more than 2 px.
+        let mut passes = 0;
+        for _pass in 0..3 {
+            passes += 1;
+            let Some(band) = self.band_pass(frame, &model) else {
+                break;
+            };
+            let fitted = if band.points.len() >= 8 {
+                fit_ellipse(&band.points)
+            } else {
+                None
+            };
+            // An ellipse fit that moved the centre or squashed the disc far beyond the
+            // detection is a diverging fit, not a shape: keep the current one.
+            let shape = fitted
+                .filter(|e| agrees_with_detection(e, &coarse))
+                .unwrap_or(model);
+            let next = shape.scaled_to_radius(band.radius);
+            let moved = max_edge_distance(&next, &model);
+            model = next;
+            last = Some((band, next));
+            if moved < 2.0 {
+                break;
+            }
+        }
+        let Some((band, ellipse)) = last else {
+            return Ok(none);
+        };
+        if band.radius < self.config.min_radius_px
+            || !band.radius.is_finite()
+            || !agrees_with_detection(&ellipse, &coarse)
+        {
+            return Ok(none);
+        }
+        let fit_rms = rms_about(&band.points, &ellipse);
+        let chi = fit_rms / band.point_sigma.max(1e-9);
+        let quality =
+            1.0 / (1.0 + (band.radius_sigma / 0.1).powi(2)) / (1.0 + (chi - 2.0).max(0.0).powi(2))
+                * band.visible_fraction;
+        let e = ellipse.eccentricity();
+        Ok(ContactRadius {
+            contact: true,
+            quality,
+            disc: Some(ContactDisc {
+                radius_px: band.radius,
+                radius_sigma_px: band.radius_sigma,
+                center_px: ellipse.center_px,
+                ellipse,
+                eccentricity: e,
+                tilt_deg: e.asin().to_degrees(),
+                tilted: e > self.config.tilt_eccentricity,
+                contrast: band.contrast,
+                edge_snr: band.edge_snr,
+                fit_rms_px: fit_rms,
+                clipped: band.visible_fraction < 1.0,
+                passes,
+            }),
+        })
+    }
+
+    /// Step 2: block-level detection. `None` = no contact.
+    fn detect(&self, frame: &GrayImage) -> Option<Coarse> {
+        let cfg = &self.config;
+        let fb = Blocks::of(frame);
+        let rb = &self.blocks;
+        let (bw, bh) = (rb.bw, rb.bh);
+        let area = (BLOCK * BLOCK) as f64;
+        let sat = cfg.saturation_level;
+        let mut n = vec![f64::NAN; bw * bh];
+        let mut valid_vals = Vec::with_capacity(bw * bh);
+        for (i, ni) in n.iter_mut().enumerate() {
+            let (fs, rs) = (f64::from(fb.sum[i]), f64::from(rb.sum[i]));
+            if fb.max[i] < sat && rb.max[i] < sat && rs / area < self.mirror_level {
+                let v = (fs - rs) / rs.max(4.0 * area);
+                *ni = v;
+                valid_vals.push(v);
+            }
+        }
+        if valid_vals.len() < 16 {
+            return None;
+        }
+        // Median and MAD from every third valid block (thousands of samples: plenty for a
+        // robust location and scale, a third of the selection cost).
+        let mut sample: Vec<f64> = valid_vals.iter().step_by(3).copied().collect();
+        let med = median(&mut sample);
+        let sigma = robust_sigma(&mut sample, med).max(1e-6);
+        let thr = cfg.detect_sigma * sigma;
+        let (mut pos, mut neg) = (Vec::new(), Vec::new());
+        for v in n.iter().filter(|v| v.is_finite()) {
+            let d = v - med;
+            if d > thr {
+                pos.push(d);
+            } else if d < -thr {
+                neg.push(-d);
+            }
+        }
+        let (sign, mut cands) = if pos.len() >= neg.len() {
+            (1.0, pos)
+        } else {
+            (-1.0, neg)
+        };
+        let min_blocks = (std::f64::consts::PI * cfg.min_radius_px.powi(2) / area).max(4.0);
+        if (cands.len() as f64) < min_blocks {
+            return None;
+        }
+        let level = median(&mut cands);
+        let mask: Vec<bool> = n
+            .iter()
+            .map(|v| v.is_finite() && sign * (v - med) > 0.5 * level)
+            .collect();
+        let component = largest_component(&mask, bw, bh);
+        if (component.len() as f64) < min_blocks {
+            return None;
+        }
+        // Fill holes (the mirror, saturated blocks) row by row: a contact disc is convex, so
+        // every block between a row's first and last component block is inside.
+        let mut row_span = vec![(u16::MAX, 0u16); bh];
+        for &(x, y) in &component {
+            let span = &mut row_span[usize::from(y)];
+            span.0 = span.0.min(x);
+            span.1 = span.1.max(x);
+        }
+        let (mut cnt, mut sx, mut sy) = (0.0, 0.0, 0.0);
+        for (y, &(lo, hi)) in row_span.iter().enumerate() {
+            if lo <= hi {
+                let k = f64::from(hi - lo + 1);
+                cnt += k;
+                sx += k * 0.5 * (f64::from(lo) + f64::from(hi));
+                sy += k * y as f64;
+            }
+        }
+        let b = BLOCK as f64;
+        let center = [
+            sx / cnt * b + (b - 1.0) / 2.0,
+            sy / cnt * b + (b - 1.0) / 2.0,
+        ];
+        let radius = (cnt * area / std::f64::consts::PI).sqrt();
+        let at_image_edge = component.iter().any(|&(x, y)| {
+            x == 0 || y == 0 || usize::from(x) + 1 >= bw || usize::from(y) + 1 >= bh
+        });
+        Some(Coarse {
+            center,
+            radius,
+            at_image_edge,
+        })
+    }
+
+    /// Width of the visible annulus between the apex mirror's masked disc and the model's
+    /// edge (along the shortest ray), px; `None` without a mirror.
+    fn mirror_gap_px(&self, model: &Ellipse) -> Option<f64> {
+        let (mc, r2) = self.mirror_disc?;
+        let d = (mc[0] - model.center_px[0]).hypot(mc[1] - model.center_px[1]);
+        Some(model.semi_minor_px - d - r2.sqrt())
+    }
+
+    /// Step 3 and 4 for one edge model.
+    fn band_pass(&self, frame: &GrayImage, model: &Ellipse) -> Option<BandPass> {
+        let cfg = &self.config;
+        let (w_img, h_img) = (frame.width(), frame.height());
+        let r_eq = model.equivalent_radius_px();
+        // Shrink band and rings for small discs so the inner ring stays inside.
+        let shrink = (r_eq / (cfg.band_half_width_px + cfg.level_ring_px + 3.0)).min(1.0);
+        let mut w = cfg.band_half_width_px * shrink;
+        let mut ring = cfg.level_ring_px * shrink;
+        // A contact just outside the apex mirror: the inner ring would lie in the mirror's
+        // mask, and a level fitted to the few pixels at the mask's rim is wrong (a 49 px
+        // contact once read 820 px). Narrow the inner ring to the visible annulus, then the
+        // band; an annulus too thin for both is not measurable.
+        if let Some(gap) = self.mirror_gap_px(model)
+            && gap < w + ring
+        {
+            ring = (gap - w).max(MIN_LEVEL_RING_PX);
+            w = gap - ring;
+            if w < MIN_BAND_FRACTION * cfg.band_half_width_px {
+                return None;
+            }
+        }
+        let (cx, cy) = (model.center_px[0], model.center_px[1]);
+        let r_lo = (model.semi_minor_px - w - ring).max(0.0);
+        let r_hi = model.semi_major_px + w + ring;
+        let sectors = cfg.sectors.max(8);
+        let per_rad = sectors as f64 / std::f64::consts::TAU;
+        let sector_of = |dx: f64, dy: f64| -> usize {
+            if sectors == 32 {
+                return sector32(dx, dy);
+            }
+            let t = (fast_atan2(dy, dx) + std::f64::consts::PI) * per_rad;
+            (t as usize).min(sectors - 1)
+        };
+        let (sin_a, cos_a) = model.angle_rad.sin_cos();
+        let (ia, ib) = (1.0 / model.semi_major_px, 1.0 / model.semi_minor_px);
+        let is_circle = (model.semi_major_px - model.semi_minor_px).abs() < 1e-9;
+        // Signed distance to the model edge (negative inside); exact for a circle, along
+        // the ray from the centre for an ellipse.
+        let signed = |dx: f64, dy: f64| -> f64 {
+            let q = (dx * dx + dy * dy).sqrt();
+            if is_circle {
+                q - model.semi_major_px
+            } else {
+                let u = (dx * cos_a + dy * sin_a) * ia;
+                let v = (-dx * sin_a + dy * cos_a) * ib;
+                let rho = (u * u + v * v).sqrt();
+                if rho > 0.0 {
+                    q - q / rho
+                } else {
+                    -model.semi_minor_px
+                }
+            }
+        };
+        let sq = |v: f64| v.max(0.0) * v.max(0.0);
+        let r_model = model.semi_major_px;
+        let (inner2, band_in2) = (sq(r_model - w - ring), sq(r_model - w));
+        let (band_out2, outer2) = (sq(r_model + w), sq(r_model + w + ring));
+        let fpx = frame.pixels();
+        let rpx = self.reference.pixels();
+        let sat = f64::from(cfg.saturation_level);
+        let mut n_inner = 0.0f64;
+        let mut inner_ring: Vec<[f64; 3]> = Vec::new();
+        let mut outer_ring: Vec<[f64; 3]> = Vec::new();
+        // Band samples: dx, dy, n (NaN if masked), s, sector; f32 keeps the buffer small.
+        let perimeter = std::f64::consts::TAU * model.semi_major_px;
+        let mut band: Vec<([f32; 4], u16)> =
+            Vec::with_capacity((perimeter * (2.0 * w + 2.0)) as usize);
+        inner_ring.reserve((perimeter * (ring + 1.0)) as usize);
+        outer_ring.reserve((perimeter * (ring + 1.0)) as usize);
+        let mut sector_clipped = vec![false; sectors];
+        let scale = 1.0 / r_hi.max(1.0);
+        let y0 = (cy - r_hi).floor() as i64;
+        let y1 = (cy + r_hi).ceil() as i64;
+        for yi in y0..=y1 {
+            let dy = yi as f64 - cy;
+            let span2 = r_hi * r_hi - dy * dy;
+            if span2 < 0.0 {
+                continue;
+            }
+            let span = span2.sqrt();
+            let (xa, xb) = ((cx - span).ceil() as i64, (cx + span).floor() as i64);
+            let hole = if dy.abs() < r_lo {
+                let s = (r_lo * r_lo - dy * dy).sqrt();
+                Some(((cx - s).ceil() as i64, (cx + s).floor() as i64))
+            } else {
+                None
+            };
+            let row_inside = yi >= 0 && (yi as usize) < h_img;
+            // Pixels inside the hole are all inner (f = 1): count them, no need to visit.
+            if let Some((ha, hb)) = hole {
+                let (ca, cb) = (ha.max(0), hb.min(w_img as i64 - 1));
+                if hb >= ha && row_inside && cb >= ca {
+                    n_inner += (cb - ca + 1) as f64;
+                }
+            }
+            // The annulus row: one x range, or two around the hole.
+            let ranges = match hole {
+                Some((ha, hb)) if hb >= ha => [(xa, ha - 1), (hb + 1, xb)],
+                _ => [(xa, xb), (1, 0)],
+            };
+            for xi in ranges.into_iter().flat_map(|(a, b)| a..=b) {
+                let dx = xi as f64 - cx;
+                let s = if is_circle {
+                    // Squared-radius classes; the exact distance only inside the band.
+                    let d2 = dx * dx + dy * dy;
+                    if d2 < band_in2 {
+                        if d2 < inner2 {
+                            -w - ring - 1.0
+                        } else {
+                            -w - 0.5 * ring
+                        }
+                    } else if d2 > band_out2 {
+                        if d2 > outer2 {
+                            w + ring + 1.0
+                        } else {
+                            w + 0.5 * ring
+                        }
+                    } else {
+                        d2.sqrt() - model.semi_major_px
+                    }
+                } else {
+                    signed(dx, dy)
+                };
+                if s > w + ring {
+                    continue;
+                }
+                let inside_img = row_inside && xi >= 0 && (xi as usize) < w_img;
+                if !inside_img {
+                    if s >= -w {
+                        sector_clipped[sector_of(dx, dy)] = true;
+                    }
+                    continue;
+                }
+                if s < -w - ring {
+                    n_inner += 1.0;
+                    continue;
+                }
+                let idx = yi as usize * w_img + xi as usize;
+                let (iv, rv) = (f64::from(fpx[idx]), f64::from(rpx[idx]));
+                let inv_r = f64::from(self.inv_reference[idx]);
+                let masked = iv >= sat || inv_r.is_nan();
+                let nv = if masked { f64::NAN } else { (iv - rv) * inv_r };
+                if s < -w {
+                    n_inner += 1.0;
+                    if !masked {
+                        inner_ring.push([dx * scale, dy * scale, nv]);
+                    }
+                } else if s <= w {
+                    band.push((
+                        [dx as f32, dy as f32, nv as f32, s as f32],
+                        sector_of(dx, dy) as u16,
+                    ));
+                } else if !masked {
+                    outer_ring.push([dx * scale, dy * scale, nv]);
+                }
+            }
+        }
+        let (p_in, sig_in) = fit_plane(&inner_ring)?;
+        let (p_out, sig_out) = fit_plane(&outer_ring)?;
+        let level = |p: &[f64; 3], dx: f64, dy: f64| p[0] + p[1] * dx * scale + p[2] * dy * scale;
+        let contrast = p_in[0] - p_out[0];
+        let noise = 0.5 * (sig_in + sig_out);
+        if contrast.abs() < 1e-9 {
+            return None;
+        }
+        let mut sector_sum = vec![0.0f64; sectors];
+        let mut sector_count = vec![0usize; sectors];
+        let mut band_sum = 0.0;
+        let mut band_var = 0.0;
+        let (mut sum_f, mut sum_1mf, mut inv_d2) = (0.0, 0.0, 0.0);
+        for &([dx, dy, nv, s], sec) in &band {
+            let (dx, dy, nv, s, sec) = (
+                f64::from(dx),
+                f64::from(dy),
+                f64::from(nv),
+                f64::from(s),
+                usize::from(sec),
+            );
+            let f = if nv.is_nan() {
+                if s < 0.0 { 1.0 } else { 0.0 }
+            } else {
+                let (li, lo) = (level(&p_in, dx, dy), level(&p_out, dx, dy));
+                let d = li - lo;
+                if d.abs() < 1e-9 {
+                    if s < 0.0 { 1.0 } else { 0.0 }
+                } else {
+                    band_var += (noise / d).powi(2);
+                    let f = (nv - lo) / d;
+                    sum_f += f;
+                    sum_1mf += 1.0 - f;
+                    inv_d2 += 1.0 / (d * d);
+                    f
+                }
+            };
+            band_sum += f;
+            sector_sum[sec] += f;
+            sector_count[sec] += 1;
+        }
+        let dtheta = std::f64::consts::TAU / sectors as f64;
+        let visible: Vec<usize> = (0..sectors).filter(|&s| !sector_clipped[s]).collect();
+        let visible_fraction = visible.len() as f64 / sectors as f64;
+        // Per-sector polar area: analytic inner part + band sum.
+        let mut points = Vec::with_capacity(sectors);
+        let mut sector_areas = vec![0.0; sectors];
+        for s in 0..sectors {
+            let theta = -std::f64::consts::PI + (s as f64 + 0.5) * dtheta;
+            let (st, ct) = theta.sin_cos();
+            let r_inner = (model.polar_radius_px(ct, st) - w).max(0.0);
+            let a_s = 0.5 * dtheta * r_inner * r_inner + sector_sum[s];
+            sector_areas[s] = a_s;
+            if !sector_clipped[s] {
+                let r_s = (2.0 * a_s.max(0.0) / dtheta).sqrt();
+                points.push([cx + r_s * ct, cy + r_s * st]);
+            }
+        }
+        let area = if visible_fraction >= 1.0 {
+            n_inner + band_sum
+        } else if visible.is_empty() {
+            return None;
+        } else {
+            visible.iter().map(|&s| sector_areas[s]).sum::<f64>() / visible_fraction
+        };
+        if area <= 0.0 {
+            return None;
+        }
+        let radius = (area / std::f64::consts::PI).sqrt();
+        // Pixel noise of the band plus the error of the fitted levels, which shifts every
+        // band pixel's f at once: dA = -(sum f) e_in / D - (sum (1 - f)) e_out / D with
+        // e ~ sigma / sqrt(N_ring) (the ring means).
+        let mean_inv_d2 = if band.is_empty() {
+            0.0
+        } else {
+            inv_d2 / band.len() as f64
+        };
+        let level_var = mean_inv_d2
+            * (sum_f.powi(2) * sig_in.powi(2) / inner_ring.len().max(1) as f64
+                + sum_1mf.powi(2) * sig_out.powi(2) / outer_ring.len().max(1) as f64);
+        let radius_sigma = (band_var + level_var).sqrt() / (std::f64::consts::TAU * radius);
+        let mean_count = band.len() as f64 / sectors as f64;
+        let point_sigma = (noise / contrast.abs()) * mean_count.sqrt() / (radius * dtheta);
+        Some(BandPass {
+            radius,
+            radius_sigma,
+            contrast,
+            edge_snr: contrast.abs() / noise.max(1e-12),
+            points,
+            point_sigma,
+            visible_fraction,
+        })
+    }
+}
+
+/// The bright apex mirror in the reference: centroid and radius of the pixels at or above
+/// `level`, plus 4 px for the soft rim (a 1-px blurred rim thresholded at a third of its
+/// height falls below 1e-4 of its height 4 px further out). `None` if there is no such spot
+/// or it is not compact (more than 5 % of the frame: not a mirror).
+fn mirror_disc(reference: &GrayImage, level: f64) -> Option<([f64; 2], f64)> {
+    let w = reference.width();
+    let (mut n, mut sx, mut sy) = (0usize, 0.0, 0.0);
+    for (i, &v) in reference.pixels().iter().enumerate() {
+        if f64::from(v) >= level {
+            n += 1;
+            sx += (i % w) as f64;
+            sy += (i / w) as f64;
+        }
+    }
+    if n == 0 || n * 20 > reference.pixels().len() {
+        return None;
+    }
+    let c = [sx / n as f64, sy / n as f64];
+    // Radius of the equal-area disc: robust to a few stray bright pixels.
+    let r = (n as f64 / std::f64::consts::PI).sqrt() + 4.0;
+    Some((c, r * r))
+}
+
+/// Whether `e` is the disc the block-level detection found (see `DETECTION_AGREEMENT`).
+fn agrees_with_detection(e: &Ellipse, coarse: &Coarse) -> bool {
+    if coarse.at_image_edge {
+        return e.equivalent_radius_px().is_finite();
+    }
+    let tolerance = DETECTION_AGREEMENT * coarse.radius + DETECTION_SLACK_PX;
+    let moved = (e.center_px[0] - coarse.center[0]).hypot(e.center_px[1] - coarse.center[1]);
+    let r = e.equivalent_radius_px();
+    r.is_finite() && (r - coarse.radius).abs() <= tolerance && moved <= tolerance
+}
+
+/// Largest distance (px) between the boundaries of two ellipses, sampled along 32 rays
+/// from the centre of `b` (distance measured along the ray).
+fn max_edge_distance(a: &Ellipse, b: &Ellipse) -> f64 {
+    (0..32)
+        .map(|i| {
+            let t = i as f64 * std::f64::consts::TAU / 32.0;
+            let (st, ct) = t.sin_cos();
+            let ra = a.polar_radius_px(ct, st);
+            let (px, py) = (a.center_px[0] + ra * ct, a.center_px[1] + ra * st);
+            let (dx, dy) = (px - b.center_px[0], py - b.center_px[1]);
+            ((dx * dx + dy * dy).sqrt() - b.polar_radius_px(dx, dy)).abs()
+        })
+        .fold(0.0, f64::max)
+}
+
+fn rms_about(points: &[[f64; 2]], e: &Ellipse) -> f64 {
+    if points.is_empty() {
+        return 0.0;
+    }
+    let ss: f64 = points
+        .iter()
+        .map(|p| {
+            let (dx, dy) = (p[0] - e.center_px[0], p[1] - e.center_px[1]);
+            ((dx * dx + dy * dy).sqrt() - e.polar_radius_px(dx, dy)).powi(2)
+        })
+        .sum();
+    (ss / points.len() as f64).sqrt()
+}
+
+/// The largest 4-connected set of `mask` blocks, as (x, y) block coordinates.
+fn largest_component(mask: &[bool], bw: usize, bh: usize) -> Vec<(u16, u16)> {
+    // A one-block border of `false` avoids bounds checks and index arithmetic per step.
+    let pw = bw + 2;
+    let mut open = vec![false; pw * (bh + 2)];
+    for y in 0..bh {
+        open[(y + 1) * pw + 1..(y + 1) * pw + 1 + bw].copy_from_slice(&mask[y * bw..(y + 1) * bw]);
+    }
+    let mut best: Vec<usize> = Vec::new();
+    let mut comp: Vec<usize> = Vec::new();
+    let mut stack: Vec<usize> = Vec::new();
+    for start in 0..open.len() {
+        if !open[start] {
+            continue;
+        }
+        comp.clear();
+        open[start] = false;
+        stack.push(start);
+        while let Some(i) = stack.pop() {
+            comp.push(i);
+            for j in [i - 1, i + 1, i - pw, i + pw] {
+                if open[j] {
+                    open[j] = false;
+                    stack.push(j);
+                }
+            }
+        }
+        if comp.len() > best.len() {
+            std::mem::swap(&mut best, &mut comp);
+        }
+    }
+    best.iter()
+        .map(|&i| (((i % pw) - 1) as u16, ((i / pw) - 1) as u16))
+        .collect()
+}
+
+/// One-shot convenience: prepares `reference` and measures `frame`.
+pub fn contact_radius(
+    frame: &GrayImage,
+    reference: &GrayImage,
+    config: &ContactRadiusConfig,
+) -> Result<ContactRadius, VisionError> {
+    ContactRadiusEstimator::new(reference.clone(), config.clone())?.measure(frame)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sector32_agrees_with_the_arctangent() {
+        let mut mismatches = 0;
+        for i in 0..3600 {
+            // 0.1-degree steps offset by 0.037 degrees: never on a boundary (k * 11.25).
+            let t = (i as f64 + 0.37) * std::f64::consts::TAU / 3600.0;
+            let (dy, dx) = (37.0 * t.sin(), 37.0 * t.cos());
+            let exact =
+                ((dy.atan2(dx) + std::f64::consts::PI) / std::f64::consts::TAU * 32.0) as usize;
+            if sector32(dx, dy) != exact.min(31) {
+                mismatches += 1;
+            }
+        }
+        assert_eq!(mismatches, 0);
+    }
+}
