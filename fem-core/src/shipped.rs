@@ -1,4 +1,4 @@
-//! Where the shipped tables (`default.lut`, the effect tables) are found: the folder named
+//! Where the shipped tables (`default.lut`, `sim-bench.lut`, the effect tables) are found: the folder named
 //! by the environment variable [`DATA_DIR_VAR`] if set, otherwise this crate's `data/`
 //! folder in the source tree the binary was built from.
 
@@ -19,4 +19,10 @@ pub fn data_dir() -> PathBuf {
 /// The production lookup table, `default.lut`.
 pub fn default_lut_path() -> PathBuf {
     data_dir().join("default.lut")
+}
+
+/// The table the simulated bench's sample is made of (mesh level -1, the settings of
+/// hil-sim's built-in sample): `sim-bench.lut`, the demo's and the simulated daemon's fit table.
+pub fn sim_bench_lut_path() -> PathBuf {
+    data_dir().join("sim-bench.lut")
 }

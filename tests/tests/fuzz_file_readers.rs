@@ -253,7 +253,7 @@ fn check_table(bytes: &[u8]) -> Result<(), String> {
 
 #[test]
 fn fit_table() {
-    let seeds = vec![repo_file("host/tests/data/fit_fixture.lut")];
+    let seeds = vec![repo_file("fem-core/data/sim-bench.lut")];
     fuzz("fit_table", &seeds, check_table);
 }
 

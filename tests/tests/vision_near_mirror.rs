@@ -3,7 +3,7 @@
 //!
 //! Before the fix, the inner level ring of such a contact lay inside the mirror's mask, the
 //! level plane was fitted to a sliver of rim pixels, and the edge model diverged: these exact
-//! frames (found by `cargo run --release -p host --features sim --example vision_stress`)
+//! frames (found by `cargo run --release -p tactile --features sim --example vision_stress`)
 //! read 59.1, 43.1, 56.1 and 81.8 px for a 48.9-49.0 px contact, and in two `tactile demo`
 //! runs the first contact frame read 8.6 mm and 16.4 mm. Now such a frame is either measured
 //! correctly or reported as "no measurable contact" (the fit leaves those out).

@@ -1,0 +1,93 @@
+//! `tactile fit` as a user runs it: JSON keys, and bad input -> exit code 2 with the file,
+//! line and column named.
+
+#![allow(clippy::unwrap_used)] // tests may unwrap: a panic fails the test with its message
+
+use std::path::PathBuf;
+use std::process::Command;
+
+fn tactile() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_tactile"))
+}
+
+/// The fit crate's test data (direct-solve truth curves) and the sim-bench table.
+fn data(name: &str) -> PathBuf {
+    if name == "fit_fixture.lut" {
+        return fem_core::shipped::sim_bench_lut_path();
+    }
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../fit/tests/data")
+        .join(name)
+}
+
+fn temp_file(name: &str, text: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("tactile-cli-fit-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join(name);
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+#[test]
+fn json_output_has_the_documented_keys() {
+    let out = tactile()
+        .arg("fit")
+        .arg(data("fem_truth_E200_p6.csv"))
+        .arg("--lut")
+        .arg(data("fit_fixture.lut"))
+        .arg("--json")
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let e = v["modulus_kpa"].as_f64().unwrap();
+    assert!((e / 200.0 - 1.0).abs() < 0.015, "{e}");
+    let ci = v["ci95_kpa"].as_array().unwrap();
+    assert_eq!(ci.len(), 2);
+    assert!(ci[0].as_f64().unwrap() <= e && e <= ci[1].as_f64().unwrap());
+    assert!(v["rms_residual_mm"].as_f64().unwrap() >= 0.0);
+    assert!(v["recommended_pressure_kpa"].as_f64().is_some());
+}
+
+#[test]
+fn malformed_csv_names_line_and_column_and_exits_2() {
+    let path = temp_file("bad.csv", "# p_air_kpa: 6\nu_s_mm,a_mm\n0.1,0.5\n0.2,abc\n");
+    let out = tactile()
+        .arg("fit")
+        .arg(&path)
+        .arg("--lut")
+        .arg(data("fit_fixture.lut"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("bad.csv:4"), "{err}");
+    assert!(err.contains("a_mm"), "{err}");
+}
+
+#[test]
+fn missing_pressure_and_missing_table_exit_2() {
+    let path = temp_file("nop.csv", "u_s_mm,a_mm\n0.1,0.5\n0.2,0.7\n0.3,0.9\n");
+    let out = tactile()
+        .arg("fit")
+        .arg(&path)
+        .arg("--lut")
+        .arg(data("fit_fixture.lut"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("p_air_kpa"));
+    let out = tactile()
+        .arg("fit")
+        .arg(data("fem_truth_E200_p6.csv"))
+        .arg("--lut")
+        .arg("/nonexistent/table.lut")
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("/nonexistent/table.lut"));
+}
