@@ -11,6 +11,7 @@
 
 #![allow(clippy::unwrap_used)] // tests may unwrap: a panic fails the test with its message
 
+use experiment::pipeline::RunError;
 use experiment::simulated::{DemoError, DemoOptions, demo_scenario, run_demo_with};
 use std::path::PathBuf;
 
@@ -114,7 +115,10 @@ fn unplug_leaves_a_readable_partial_record() {
     let msg = err.to_string();
     eprintln!("{msg}");
     assert!(
-        matches!(err, DemoError::Experiment(_) | DemoError::Link(_)),
+        matches!(
+            err,
+            DemoError::Run(RunError::Experiment(_) | RunError::Link(_)) | DemoError::Link(_)
+        ),
         "{msg}"
     );
     let dir = opts.out.unwrap();

@@ -14,7 +14,8 @@ use experiment::calibration::{
     CalibrationRecord, RigidSampleCurve, SweepPlan, fit_sweep, load_latest, manometer_zero_kpa,
     proximity_sweep, save_record, tare_load,
 };
-use experiment::measurement::{LutInfo, run_measurement};
+use experiment::pipeline::{LutInfo, RunContext, run_experiment};
+use experiment::record_meta::RecordStatus;
 use experiment::records::RecordDir;
 use experiment::simulated::{
     DEMO_MAX_DEPTH_MM, DEMO_RIGID_MESH_LEVEL, DEMO_STEPS, SimRadiusSource, demo_scenario,
@@ -79,7 +80,7 @@ fn calibrate_then_measure_against_the_pty_bench() {
         repeats: 3,
         stream_rate_hz: 2000,
     };
-    let report = run_measurement(
+    let report = run_experiment(
         &mut link,
         &stored,
         &plan,
@@ -89,7 +90,12 @@ fn calibrate_then_measure_against_the_pty_bench() {
             path: fixture_lut_path().display().to_string(),
             sha256: lut_file.sha256.clone(),
         },
+        &RunContext {
+            settle: Duration::from_millis(700),
+            ..RunContext::default()
+        },
         &indicatif::ProgressBar::hidden(),
+        &|e| RecordStatus::Failed(e.to_string()),
         |link, px| {
             let reference = reference_frame(link, &bench, Duration::from_millis(300))
                 .map_err(|e| e.to_string())?;

@@ -4,7 +4,6 @@
 //! runs queued jobs one at a time and writes their records. The emergency stop does not
 //! wait for this thread: it goes through the [`GuardedTransport`].
 
-use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::mpsc::Receiver;
 use std::time::{Duration, Instant};
@@ -59,7 +58,7 @@ pub struct DeviceThread {
     pub(super) config: DeviceConfig,
     pub(super) fit: FitWorker,
     pub(super) lut: Arc<Lut>,
-    pub(super) lut_path: PathBuf,
+    pub(super) lut_info: experiment::pipeline::LutInfo,
     /// USB serial number of the controller (real hardware), learnt at the first connect.
     usb_serial: Option<String>,
     /// Serial number from the device's Hello, learnt at the first connect.
@@ -81,15 +80,13 @@ impl DeviceThread {
         source: DeviceSource,
         config: DeviceConfig,
         lut: Arc<Lut>,
-        lut_path: PathBuf,
+        lut_info: experiment::pipeline::LutInfo,
     ) -> Result<Self, String> {
         let fit = FitWorker::start(Arc::clone(&lut), shared.events.clone())?;
         let camera = match (&source, &config.camera) {
             #[cfg(feature = "sim")]
             (DeviceSource::Sim { .. }, _) => "simulated (hil-sim frame channel)".to_string(),
-            (_, Some(dev)) => format!(
-                "{dev}: opened per experiment; camera experiments on real hardware are not implemented in the daemon yet"
-            ),
+            (_, Some(dev)) => format!("{dev}: opened per experiment"),
             (_, None) => "none".to_string(),
         };
         shared.lock().status.camera = camera;
@@ -100,7 +97,7 @@ impl DeviceThread {
             config,
             fit,
             lut,
-            lut_path,
+            lut_info,
             usb_serial: None,
             device_serial: None,
             open_gap: None,

@@ -81,12 +81,12 @@ pub fn summary(fit: &ModulusFit) -> FitSummary {
     }
 }
 
-/// Reads and checks a table.
-pub fn load_lut(path: &Path) -> Result<Arc<Lut>, String> {
+/// Reads and checks a table; returns it with its content hash.
+pub fn load_lut(path: &Path) -> Result<(Arc<Lut>, String), String> {
     let file = fem_core::lut::read_lut(path)
         .map_err(|e| format!("lookup table {}: {e}", path.display()))?;
     LutModel::new(&file.lut).map_err(|e| format!("lookup table {}: {e}", path.display()))?;
-    Ok(Arc::new(file.lut))
+    Ok((Arc::new(file.lut), file.sha256))
 }
 
 fn run(lut: &Lut, rx: Receiver<FitRequest>, events: broadcast::Sender<Event>) {

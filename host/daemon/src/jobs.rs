@@ -9,14 +9,17 @@ use std::time::Duration;
 use protocol::Request;
 
 use super::api::{Event, ExperimentRequest, Job, JobState};
+use super::device_thread::DeviceSource;
 use super::device_thread::{DeviceThread, link_lost};
-use super::fit_worker::{model_curve, summary};
+use super::fit_worker::summary;
 use super::guarded_transport::StopKind;
 use super::live_radius::LiveRadius;
 use experiment::calibration::{CalibrationRecord, ProximityCalibration};
+use experiment::pipeline::{self, RunContext, RunError};
+use experiment::record_meta::RecordStatus;
 use experiment::records::{RecordDir, unix_now_s, utc_stamp};
-use experiment::{ExperimentError, IndentationPlan, run_indentation};
-use fit::{FitPoint, LutModel};
+use experiment::{ExperimentError, IndentationPlan, RadiusSource};
+use fit::LutModel;
 use link::Link;
 use vision::px_per_mm::PxPerMmCalibration;
 
@@ -153,7 +156,9 @@ fn plan_of(r: &ExperimentRequest) -> IndentationPlan {
     }
 }
 
-/// Runs one experiment job. `None`: the link is still usable.
+/// Runs one experiment job through the experiment pipeline (the same one `tactile measure`
+/// and `tactile demo` use), with the live feed tapping the radii. `None`: the link is still
+/// usable.
 pub fn run_experiment(dt: &mut DeviceThread, link: &mut Link, job: Job) -> Option<JobEnd> {
     let Some(request) = job.experiment.clone() else {
         dt.finish_job(job.id, JobState::Failed, "no parameters".into(), None);
@@ -171,7 +176,7 @@ pub fn run_experiment(dt: &mut DeviceThread, link: &mut Link, job: Job) -> Optio
             return None;
         }
     };
-    let (Some(proximity), Some(px)) = (cal.proximity_near(request.pressure_kpa), cal.px_per_mm())
+    let (Some(proximity), Some(_)) = (cal.proximity_near(request.pressure_kpa), cal.px_per_mm())
     else {
         dt.finish_job(
             job.id,
@@ -183,6 +188,13 @@ pub fn run_experiment(dt: &mut DeviceThread, link: &mut Link, job: Job) -> Optio
             None,
         );
         return None;
+    };
+    let model = match LutModel::new(&dt.lut) {
+        Ok(m) => m,
+        Err(e) => {
+            dt.finish_job(job.id, JobState::Failed, format!("lookup table: {e}"), None);
+            return None;
+        }
     };
     let name = format!("{}-job{}", utc_stamp(unix_now_s()), job.id);
     let record = match RecordDir::create(&dt.shared.records_dir.join(&name)) {
@@ -196,23 +208,17 @@ pub fn run_experiment(dt: &mut DeviceThread, link: &mut Link, job: Job) -> Optio
         j.record = Some(name.clone());
         j.message = "preparing".into();
     });
-    let zero = cal.record.manometer_zero_kpa;
-    let mut meta = serde_json::json!({
-        "software": { "name": "tactile daemon", "version": env!("CARGO_PKG_VERSION") },
-        "job": job.id,
-        "protocol_version": link.info().protocol_version,
-        "device": {
-            "serial": link.info().serial.as_str(),
-            "firmware_version": link.info().firmware_version.as_str(),
-            "port": link.port_name(),
-        },
-        "lut": { "path": dt.lut_path.display().to_string() },
-        "calibration": { "path": cal.path.display().to_string(), "record": cal.record },
-        "plan": request,
-        "status": "running",
-        "started_unix_s": unix_now_s(),
+    // The calibration applied is the stored one, with the proximity parabola nearest the
+    // requested pressure filed under it.
+    let mut calibration = cal.record.clone();
+    calibration
+        .proximity
+        .retain(|c| c.p_air_kpa != request.pressure_kpa);
+    calibration.proximity.push(ProximityCalibration {
+        p_air_kpa: request.pressure_kpa,
+        ..proximity
     });
-    let _ = record.write_json("meta.json", &meta);
+    let zero = calibration.manometer_zero_kpa;
     let switch = Arc::clone(&dt.shared.switch);
     if let Ok(mut tap) = switch.tap.lock() {
         tap.proximity = Some(proximity);
@@ -234,73 +240,67 @@ pub fn run_experiment(dt: &mut DeviceThread, link: &mut Link, job: Job) -> Optio
             let _ = shared.events.send(Event::Job { job });
         }
     };
+    let context = RunContext {
+        software: "tactile daemon".into(),
+        calibration_path: Some(cal.path.display().to_string()),
+        scenario: None,
+        job: Some(job.id),
+        settle: Duration::from_millis(1000),
+    };
     let progress = indicatif::ProgressBar::hidden();
-    let outcome = run_with_source(
-        dt,
+    let stop_switch = Arc::clone(&dt.shared.switch);
+    let failure_status = move |e: &ExperimentError| match stop_switch
+        .is_locked()
+        .then(|| stop_switch.last_kind())
+        .flatten()
+    {
+        Some(StopKind::Emergency) => RecordStatus::Partial("emergency stop".into()),
+        Some(StopKind::Cancel) => RecordStatus::Partial("cancelled".into()),
+        None => RecordStatus::Partial(e.to_string()),
+    };
+    let mut frames = FrameBench {
+        source: &dt.source,
+        camera: dt.config.camera.clone(),
+        switch: Arc::clone(&switch),
+        fit: dt.fit.clone(),
+        units: *link.units(),
+        proximity,
+        plan,
+        on_progress: &mut on_progress,
+    };
+    let outcome = pipeline::run_experiment(
         link,
+        &calibration,
         &plan,
-        &proximity,
-        zero,
-        px,
         &record,
+        &model,
+        &dt.lut_info,
+        &context,
         &progress,
-        &mut on_progress,
+        &failure_status,
+        |link, px| frames.radius_source(link, px),
     );
     if let Ok(mut tap) = switch.tap.lock() {
         tap.proximity = None;
         tap.capture = None;
     }
-    let stats = link.stats();
-    meta["link"] = serde_json::to_value(stats).unwrap_or_default();
-    // The pressure trace plot, for complete and partial records alike.
-    if let Err(e) = fit::plots::write_pressure_trace(&record.dir) {
-        meta["notes"] = serde_json::json!([format!("pressure trace not plotted: {e}")]);
-    }
-    meta["finished_unix_s"] = serde_json::json!(unix_now_s());
     match outcome {
-        Ok((result, live_points)) => {
-            let final_points: Vec<FitPoint> = result
-                .points
-                .iter()
-                .filter(|(_, p)| p.a_mm > 0.0 && p.u_s_mm > 0.0)
-                .map(|(t, p)| FitPoint {
-                    u_s_mm: p.u_s_mm,
-                    a_mm: p.a_mm,
-                    p_air_kpa: plan.pressure_kpa,
-                    test: *t,
-                    load_n: p.load_n,
-                })
-                .collect();
-            write_curve(&record, &result, plan.pressure_kpa);
-            meta["live_points"] = serde_json::json!(live_points);
-            match dt.fit.fit_now(final_points.clone()) {
-                Ok(fit) => {
-                    let _ = record.write_json("fit.json", &fit);
-                    if let Ok(model) = LutModel::new(&dt.lut) {
-                        let _ =
-                            fit::plots::write_fit_plots(&record.dir, &model, &final_points, &fit);
-                        let _ = model_curve(&model, &fit, &final_points);
-                    }
-                    meta["status"] = serde_json::json!("complete");
-                    let _ = record.write_json("meta.json", &meta);
-                    let s = summary(&fit);
-                    dt.shared.update_job(id, |j| j.fit = Some(s));
-                    dt.finish_job(
-                        id,
-                        JobState::Complete,
-                        format!(
-                            "E2 = {:.1} kPa (95 % CI {:.1} .. {:.1})",
-                            fit.modulus_kpa, fit.ci95_kpa[0], fit.ci95_kpa[1]
-                        ),
-                        None,
-                    );
-                }
-                Err(e) => {
-                    meta["status"] = serde_json::json!(format!("complete; fit failed: {e}"));
-                    let _ = record.write_json("meta.json", &meta);
-                    dt.finish_job(id, JobState::Failed, format!("fit failed: {e}"), None);
-                }
-            }
+        Ok(report) => {
+            dt.shared
+                .update_job(id, |j| j.fit = Some(summary(&report.fit)));
+            dt.finish_job(
+                id,
+                JobState::Complete,
+                format!(
+                    "E2 = {:.1} kPa (95 % CI {:.1} .. {:.1})",
+                    report.modulus_kpa, report.ci95_kpa[0], report.ci95_kpa[1]
+                ),
+                None,
+            );
+            None
+        }
+        Err(RunError::Analysis(e)) => {
+            dt.finish_job(id, JobState::Failed, format!("fit failed: {e}"), None);
             None
         }
         Err(e) => {
@@ -310,12 +310,12 @@ pub fn run_experiment(dt: &mut DeviceThread, link: &mut Link, job: Job) -> Optio
                 Some(StopKind::Cancel) => (JobState::Cancelled, "cancelled".to_string()),
                 None => (JobState::Partial, e.to_string()),
             };
-            meta["status"] = serde_json::json!(format!("partial: {message}"));
-            let _ = record.write_json("meta.json", &meta);
             let lost = match &e {
                 _ if stopped.is_some() => None,
-                ExperimentError::Link(le) => link_lost(le),
-                ExperimentError::DeviceSilent { .. } => Some(e.to_string()),
+                RunError::Link(le) | RunError::Experiment(ExperimentError::Link(le)) => {
+                    link_lost(le)
+                }
+                RunError::Experiment(ExperimentError::DeviceSilent { .. }) => Some(e.to_string()),
                 _ => None,
             };
             if lost.is_some() {
@@ -342,135 +342,69 @@ pub fn run_experiment(dt: &mut DeviceThread, link: &mut Link, job: Job) -> Optio
     }
 }
 
-fn write_curve(record: &RecordDir, result: &experiment::IndentationResult, p: f64) {
-    use fit::curve_csv::{CurveCsv, CurveRow, write_curve_csv};
-    let rows: Vec<CurveRow> = result
-        .points
-        .iter()
-        .map(|(t, q)| CurveRow {
-            u_s_mm: q.u_s_mm,
-            a_mm: q.a_mm,
-            load_n: q.load_n,
-            p_air_kpa: Some(q.p_air_kpa),
-            t_s: Some(q.t_s),
-            phase: Some(q.phase),
-            test: Some(*t),
-            h_mm: None,
-            volume_mm3: None,
-        })
-        .collect();
-    let _ = write_curve_csv(
-        &record.path("curve.csv"),
-        &CurveCsv {
-            metadata: vec![("p_air_kpa".into(), format!("{p}"))],
-            rows,
-        },
-    );
+/// Where the daemon's frames come from (hil-sim's renderer or a V4L2 camera), each radius
+/// passing through the live feed ([`LiveRadius`]) on its way to the pipeline.
+struct FrameBench<'s> {
+    source: &'s DeviceSource,
+    camera: Option<String>,
+    switch: Arc<super::guarded_transport::StopSwitch>,
+    fit: super::fit_worker::FitWorker,
+    units: link::units::SampleUnits,
+    proximity: ProximityCalibration,
+    plan: IndentationPlan,
+    on_progress: &'s mut dyn FnMut(f64, String),
 }
 
-#[allow(clippy::too_many_arguments)]
-fn run_with_source(
-    dt: &mut DeviceThread,
-    link: &mut Link,
-    plan: &IndentationPlan,
-    proximity: &ProximityCalibration,
-    zero: f64,
-    px: PxPerMmCalibration,
-    record: &RecordDir,
-    progress: &indicatif::ProgressBar,
-    on_progress: &mut dyn FnMut(f64, String),
-) -> Result<(experiment::IndentationResult, usize), ExperimentError> {
-    let units = *link.units();
-    let switch = Arc::clone(&dt.shared.switch);
-    let fit = dt.fit.clone();
-    match &dt.source {
-        #[cfg(feature = "sim")]
-        super::device_thread::DeviceSource::Sim { bench, scenario } => {
-            use experiment::simulated::{SimRadiusSource, reference_frame};
-            link.request(Request::Vent { open: false })?;
-            link.request(Request::SetLed {
-                duty_per_10k: 10_000,
-            })?;
-            link.request(Request::SetPressure {
-                setpoint_kpa: (plan.pressure_kpa + zero) as f32,
-            })?;
-            on_progress(0.0, "reference frame".into());
-            let reference =
-                reference_frame(link, bench, Duration::from_millis(1000)).map_err(sim_error)?;
-            let mut inner =
-                SimRadiusSource::new(bench, &scenario.clock, reference, px).map_err(sim_error)?;
-            let mut live = LiveRadius::new(
-                &mut inner,
-                switch,
-                fit,
-                units,
-                *proximity,
-                plan.pressure_kpa,
-                plan.start_mm,
-                progress.clone(),
-                on_progress,
-            );
-            let r = run_indentation(link, &mut live, plan, proximity, zero, record, progress)?;
-            Ok((r, live.points.len()))
-        }
-        super::device_thread::DeviceSource::Port { .. } => {
-            use camera::{V4l2Config, V4l2Source};
-            use experiment::camera_radius::{CameraRadiusSource, capture_reference};
-            let camera_error = |reason: String| {
-                ExperimentError::Record(experiment::records::RecordError::Encode {
-                    path: record.dir.clone(),
-                    reason,
+impl<'s> FrameBench<'s> {
+    fn radius_source<'a>(
+        &'a mut self,
+        link: &mut Link,
+        px: PxPerMmCalibration,
+    ) -> Result<Box<dyn RadiusSource + 'a>, String> {
+        (self.on_progress)(0.0, "reference frame".into());
+        let inner: Box<dyn RadiusSource + 'a> = match self.source {
+            #[cfg(feature = "sim")]
+            DeviceSource::Sim { bench, scenario } => {
+                use experiment::simulated::{SimRadiusSource, reference_frame};
+                let reference = reference_frame(link, bench, Duration::from_millis(50))
+                    .map_err(|e| e.to_string())?;
+                Box::new(
+                    SimRadiusSource::new(bench, &scenario.clock, reference, px)
+                        .map_err(|e| e.to_string())?,
+                )
+            }
+            DeviceSource::Port { .. } => {
+                use camera::{V4l2Config, V4l2Source};
+                use experiment::camera_radius::{CameraRadiusSource, capture_reference};
+                let _ = &link;
+                let Some(device) = self.camera.clone() else {
+                    return Err("no camera: start the daemon with --camera DEV".into());
+                };
+                // The camera is opened per experiment, so one unplugged and plugged back in
+                // between experiments is simply found again.
+                let mut source = V4l2Source::open(&V4l2Config {
+                    device: Some(PathBuf::from(&device)),
+                    ..V4l2Config::default()
                 })
-            };
-            let Some(device) = dt.config.camera.clone() else {
-                return Err(camera_error(
-                    "no camera: start the daemon with --camera DEV".into(),
-                ));
-            };
-            link.request(Request::Vent { open: false })?;
-            link.request(Request::SetLed {
-                duty_per_10k: 10_000,
-            })?;
-            link.request(Request::SetPressure {
-                setpoint_kpa: (plan.pressure_kpa + zero) as f32,
-            })?;
-            on_progress(0.0, "reference frame".into());
-            link.pump(Duration::from_millis(1000))?;
-            // The camera is opened per experiment, so one unplugged and plugged back in
-            // between experiments is simply found again.
-            let mut source = V4l2Source::open(&V4l2Config {
-                device: Some(PathBuf::from(&device)),
-                ..V4l2Config::default()
-            })
-            .map_err(|e| camera_error(format!("camera {device}: {e}")))?;
-            let reference = capture_reference(&mut source, 10)
-                .map_err(|e| camera_error(format!("camera {device}: {e}")))?;
-            let mut inner = CameraRadiusSource::start(source, reference, px)
-                .map_err(|e| camera_error(format!("camera {device}: {e}")))?;
-            let mut live = LiveRadius::new(
-                &mut inner,
-                switch,
-                fit,
-                units,
-                *proximity,
-                plan.pressure_kpa,
-                plan.start_mm,
-                progress.clone(),
-                on_progress,
-            );
-            let r = run_indentation(link, &mut live, plan, proximity, zero, record, progress)?;
-            Ok((r, live.points.len()))
-        }
-    }
-}
-
-#[cfg(feature = "sim")]
-fn sim_error(e: experiment::simulated::SimRunError) -> ExperimentError {
-    match e {
-        experiment::simulated::SimRunError::Link(l) => ExperimentError::Link(l),
-        other => ExperimentError::Record(experiment::records::RecordError::Encode {
-            path: PathBuf::new(),
-            reason: other.to_string(),
-        }),
+                .map_err(|e| format!("camera {device}: {e}"))?;
+                let reference = capture_reference(&mut source, 10)
+                    .map_err(|e| format!("camera {device}: {e}"))?;
+                Box::new(
+                    CameraRadiusSource::start(source, reference, px)
+                        .map_err(|e| format!("camera {device}: {e}"))?,
+                )
+            }
+        };
+        Ok(Box::new(LiveRadius::new(
+            inner,
+            Arc::clone(&self.switch),
+            self.fit.clone(),
+            self.units,
+            self.proximity,
+            self.plan.pressure_kpa,
+            self.plan.start_mm,
+            indicatif::ProgressBar::hidden(),
+            &mut *self.on_progress,
+        )))
     }
 }

@@ -33,7 +33,7 @@ struct DisplacementTrack {
 
 /// The wrapper.
 pub struct LiveRadius<'a> {
-    inner: &'a mut dyn RadiusSource,
+    inner: Box<dyn RadiusSource + 'a>,
     switch: Arc<StopSwitch>,
     fit: FitWorker,
     units: SampleUnits,
@@ -61,7 +61,7 @@ impl std::fmt::Debug for LiveRadius<'_> {
 impl<'a> LiveRadius<'a> {
     #[allow(clippy::too_many_arguments)]
     pub fn new(
-        inner: &'a mut dyn RadiusSource,
+        inner: Box<dyn RadiusSource + 'a>,
         switch: Arc<StopSwitch>,
         fit: FitWorker,
         units: SampleUnits,

@@ -108,7 +108,8 @@ pub fn start(options: DaemonOptions) -> Result<DaemonHandle, DaemonError> {
     listener
         .set_nonblocking(true)
         .map_err(|source| DaemonError::Bind { addr, source })?;
-    let lut = super::fit_worker::load_lut(&options.lut_path).map_err(DaemonError::Start)?;
+    let (lut, lut_sha256) =
+        super::fit_worker::load_lut(&options.lut_path).map_err(DaemonError::Start)?;
     let (events, _) = broadcast::channel(4096);
     let switch = StopSwitch::new(events);
     let (cmd_tx, cmd_rx) = std::sync::mpsc::channel::<Command>();
@@ -133,7 +134,10 @@ pub fn start(options: DaemonOptions) -> Result<DaemonHandle, DaemonError> {
         options.source,
         options.device,
         lut,
-        options.lut_path.clone(),
+        experiment::pipeline::LutInfo {
+            path: options.lut_path.display().to_string(),
+            sha256: lut_sha256,
+        },
     )
     .map_err(DaemonError::Start)?;
     let device = std::thread::Builder::new()

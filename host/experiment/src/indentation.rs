@@ -24,7 +24,7 @@ pub trait RadiusSource {
 }
 
 /// What to do.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct IndentationPlan {
     pub pressure_kpa: f64,
     /// Stage position (mm from its zero) where each cycle starts, above the sample.

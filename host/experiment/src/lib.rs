@@ -6,14 +6,18 @@
 //! - [`indentation`]: the run itself against a [`link::Link`] and a [`RadiusSource`];
 //! - [`camera_radius`]: a [`RadiusSource`] over any camera [`camera::FrameSource`];
 //! - [`analysis`]: curve.csv, the fit and the plots of a finished run;
-//! - [`measurement`]: a whole `tactile measure` run with stored calibrations.
+//! - [`pipeline`]: one whole experiment with a calibration applied, for every caller
+//!   (`tactile measure`, `tactile demo`, the daemon);
+//! - [`record_meta`]: the record's `meta.json`;
+//! - [`calibration`], [`records`]: calibration procedures and records, record folders.
 
 pub mod analysis;
 pub mod calibration;
 pub mod camera_radius;
 pub mod indentation;
-pub mod measurement;
 pub mod pairing;
+pub mod pipeline;
+pub mod record_meta;
 pub mod records;
 #[cfg(feature = "sim")]
 pub mod simulated;

@@ -17,7 +17,6 @@ use hil_sim::camera::{CameraRenderer, FrameScene, PixelFormat};
 use hil_sim::device::{SimDevice, SimFrame};
 use hil_sim::rng::SimRng;
 use hil_sim::scenario::Scenario;
-use protocol::Request;
 
 use super::RadiusSource;
 use super::pairing::RadiusSample;
@@ -390,11 +389,7 @@ pub enum DemoError {
     #[error(transparent)]
     Record(#[from] crate::records::RecordError),
     #[error(transparent)]
-    Experiment(#[from] super::ExperimentError),
-    #[error("fit: {0}")]
-    Fit(#[from] fit::FitError),
-    #[error("curve: {0}")]
-    Curve(#[from] fit::curve_csv::CurveCsvError),
+    Run(#[from] super::pipeline::RunError),
 }
 
 impl DemoError {
@@ -531,37 +526,15 @@ pub fn run_demo_with(scenario: Scenario, options: &DemoOptions) -> Result<DemoRe
     calibration.manometer_zero_kpa = manometer_zero;
     record.write_json("calibration.json", &calibration)?;
 
-    // 3. measurement
+    // 3. the experiment, through the one pipeline every caller uses
     let true_modulus = scenario.sample.modulus_kpa;
     let scenario_clock = scenario.clock.clone();
     let scenario_json = serde_json::to_value(&scenario).unwrap_or_default();
     let (bench, mut link) = start_device_and_connect(measured_device)?;
-    let mut meta = serde_json::json!({
-        "software": { "name": "tactile", "version": env!("CARGO_PKG_VERSION") },
-        "protocol_version": link.info().protocol_version,
-        "device": {
-            "serial": link.info().serial.as_str(),
-            "firmware_version": link.info().firmware_version.as_str(),
-            "port": link.port_name(),
-        },
-        "lut": { "path": lut_path.display().to_string(), "sha256": lut_file.sha256 },
-        "calibration": calibration,
-        "scenario": scenario_json,
-        "plan": { "pressure_kpa": pressure, "repeats": options.repeats },
-        "status": "running",
-    });
-    record.write_json("meta.json", &meta)?;
-    link.request(Request::SetLed {
-        duty_per_10k: 10_000,
+    let model = LutModel::new(&lut_file.lut).map_err(|e| DemoError::Lut {
+        path: lut_path.display().to_string(),
+        reason: e.to_string(),
     })?;
-    link.request(Request::SetPressure {
-        setpoint_kpa: (pressure + manometer_zero) as f32,
-    })?;
-    // the pressure settles within ~0.2 s (firmware's pressure_regulation tests); the
-    // reference is the inflated, untouched shell
-    let reference = reference_frame(&mut link, &bench, Duration::from_millis(700))?;
-    let px_per_mm = px.px_per_mm;
-    let mut source = SimRadiusSource::new(&bench, &scenario_clock, reference, px)?;
     let plan = super::IndentationPlan {
         pressure_kpa: pressure,
         start_mm: surface - 0.2,
@@ -570,60 +543,53 @@ pub fn run_demo_with(scenario: Scenario, options: &DemoOptions) -> Result<DemoRe
         repeats: options.repeats,
         stream_rate_hz: 2000,
     };
-    let run = super::run_indentation(
+    let context = super::pipeline::RunContext {
+        software: "tactile demo".into(),
+        calibration_path: None,
+        scenario: Some(scenario_json),
+        job: None,
+        // the pressure settles within ~0.2 s (firmware's pressure_regulation tests); the
+        // reference is the inflated, untouched shell
+        settle: Duration::from_millis(700),
+    };
+    let px_per_mm = px.px_per_mm;
+    let run = super::pipeline::run_experiment(
         &mut link,
-        &mut source,
+        &calibration,
         &plan,
-        &proximity,
-        manometer_zero,
         &record,
+        &model,
+        &super::pipeline::LutInfo {
+            path: lut_path.display().to_string(),
+            sha256: lut_file.sha256.clone(),
+        },
+        &context,
         &progress,
+        &|e| super::record_meta::RecordStatus::Failed(e.to_string()),
+        |link, px| {
+            let reference = reference_frame(link, &bench, Duration::from_millis(50))
+                .map_err(|e| e.to_string())?;
+            let source = SimRadiusSource::new(&bench, &scenario_clock, reference, px)
+                .map_err(|e| e.to_string())?;
+            Ok(Box::new(source))
+        },
     );
     progress.finish_and_clear();
-    let stats = link.stats();
-    let (unmeasured, dropped) = source.failures();
-    let result = match run {
-        Ok(r) => r,
-        Err(e) => {
-            meta["status"] = serde_json::json!(format!("failed: {e}"));
-            meta["link"] = serde_json::to_value(stats).unwrap_or_default();
-            record.write_json("meta.json", &meta)?;
-            return Err(e.into());
-        }
-    };
     drop(link);
-    drop(source);
     let _ = bench.stop();
-    // 4. curve, fit, plots
-    let model = LutModel::new(&lut_file.lut).map_err(|e| DemoError::Lut {
-        path: lut_path.display().to_string(),
-        reason: e.to_string(),
-    })?;
-    let (fit, points, plot_problem) =
-        super::analysis::write_curve_and_fit(&record, &result, pressure, &model).map_err(|e| {
-            match e {
-                super::analysis::AnalysisError::Record(e) => DemoError::Record(e),
-                super::analysis::AnalysisError::Curve(e) => DemoError::Curve(e),
-                super::analysis::AnalysisError::Fit(e) => DemoError::Fit(e),
-            }
-        })?;
-    meta["status"] = serde_json::json!("complete");
-    meta["link"] = serde_json::to_value(stats).unwrap_or_default();
-    record.write_json("meta.json", &meta)?;
-    if let Some(e) = plot_problem {
-        notes.push(format!("plots could not be written: {e}"));
-    }
+    let report = run?;
+    notes.extend(report.notes.iter().cloned());
     Ok(DemoReport {
-        modulus_kpa: fit.modulus_kpa,
-        ci95_kpa: fit.ci95_kpa,
-        rms_residual_mm: fit.rms_residual_mm,
-        record_dir: record.dir.display().to_string(),
+        modulus_kpa: report.modulus_kpa,
+        ci95_kpa: report.ci95_kpa,
+        rms_residual_mm: report.rms_residual_mm,
+        record_dir: report.record_dir,
         true_modulus_kpa: true_modulus,
         partial: false,
-        points: points.len(),
-        link: stats,
-        frames_unmeasured: unmeasured,
-        frames_dropped: dropped,
+        points: report.points,
+        link: report.link,
+        frames_unmeasured: report.frames_unmeasured,
+        frames_dropped: report.frames_dropped,
         px_per_mm,
         proximity,
         elapsed_s: started.elapsed().as_secs_f64(),

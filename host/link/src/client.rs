@@ -90,7 +90,7 @@ impl LinkError {
 }
 
 /// Counters for reports and records.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, serde::Deserialize)]
 pub struct LinkStats {
     pub requests: u64,
     pub retries: u64,

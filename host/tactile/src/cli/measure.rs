@@ -11,7 +11,8 @@ use camera::{PixelFormat, V4l2Config, V4l2Source};
 use experiment::IndentationPlan;
 use experiment::calibration::{CalibrationRecord, load_latest, load_record};
 use experiment::camera_radius::{CameraRadiusSource, capture_reference};
-use experiment::measurement::{LutInfo, run_measurement};
+use experiment::pipeline::{LutInfo, RunContext, run_experiment};
+use experiment::record_meta::RecordStatus;
 use experiment::records::{RecordDir, unix_now_s, utc_stamp};
 use fit::LutModel;
 use link::{Link, LinkConfig, SerialTransport};
@@ -136,14 +137,23 @@ pub fn run(args: MeasureArgs) -> ExitCode {
         path: lut_path.display().to_string(),
         sha256: lut_file.sha256.clone(),
     };
-    let result = run_measurement(
+    let context = RunContext {
+        software: "tactile measure".into(),
+        calibration_path: Some(cal_path.display().to_string()),
+        scenario: None,
+        job: None,
+        settle: Duration::from_millis(1000),
+    };
+    let result = run_experiment(
         &mut link,
         &calibration,
         &plan,
         &record,
         &model,
         &lut,
+        &context,
         &progress,
+        &|e| RecordStatus::Failed(e.to_string()),
         |_link, px| {
             let mut source = V4l2Source::open(&V4l2Config {
                 device: Some(camera),

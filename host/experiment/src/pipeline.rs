@@ -1,26 +1,28 @@
-//! One complete measurement (`tactile measure`): with stored calibrations applied, set the
-//! pressure, take the camera's no-contact reference at the start position, run the
-//! indentations ([`super::run_indentation`]), then write curve.csv, the fit and the plots
-//! ([`super::analysis`]). The camera is supplied by the caller as a function that builds a
-//! [`RadiusSource`] once the reference can be taken, so a V4L2 camera
-//! ([`super::camera_radius::CameraRadiusSource`]) and hil-sim's in-process frames are used
-//! the same way.
+//! One experiment, whoever runs it — `tactile measure`, `tactile demo`, the daemon's jobs:
+//! with a calibration applied, set the pressure, move to the start position, take the
+//! camera's no-contact reference, run the indentations ([`super::run_indentation`]), then
+//! write `curve.csv`, the fit and the plots ([`super::analysis`]), keeping `meta.json`
+//! ([`RecordMeta`], one typed and versioned schema) up to date at every step. The frame
+//! source is supplied by the caller as a function that builds a [`RadiusSource`] once the
+//! reference can be taken, so a V4L2 camera
+//! ([`super::camera_radius::CameraRadiusSource`]), hil-sim's in-process frames and the
+//! daemon's live-feed wrapper are used the same way.
 
 use std::time::Duration;
 
 use protocol::{ChannelSet, Request, StatusFlags};
 
 use super::analysis::{AnalysisError, write_curve_and_fit};
+use super::record_meta::{FrameCounts, RecordMeta, RecordStatus};
 use super::{ExperimentError, IndentationPlan, RadiusSource, run_indentation};
 use crate::calibration::CalibrationRecord;
-use crate::records::{RecordDir, RecordError};
+use crate::records::{RecordDir, RecordError, unix_now_s};
 use fit::{LutModel, ModulusFit};
-use host_clock;
 use link::{Link, LinkError, LinkStats};
 use vision::px_per_mm::PxPerMmCalibration;
 
 #[derive(Debug, thiserror::Error)]
-pub enum MeasureError {
+pub enum RunError {
     #[error(
         "calibration: no proximity calibration at {pressure_kpa} kPa (have: {have}); run `tactile calibrate proximity --pressure {pressure_kpa}`"
     )]
@@ -42,15 +44,15 @@ pub enum MeasureError {
 }
 
 /// What the table is, for meta.json.
-#[derive(Debug, Clone, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct LutInfo {
     pub path: String,
     pub sha256: String,
 }
 
-/// What a measurement produced.
+/// What an experiment produced.
 #[derive(Debug, Clone, serde::Serialize)]
-pub struct MeasurementReport {
+pub struct ExperimentReport {
     pub modulus_kpa: f64,
     pub ci95_kpa: [f64; 2],
     pub rms_residual_mm: f64,
@@ -66,8 +68,8 @@ pub struct MeasurementReport {
 }
 
 /// The camera scale stored in a calibration record.
-pub fn px_per_mm_of(calibration: &CalibrationRecord) -> Result<PxPerMmCalibration, MeasureError> {
-    let px_per_mm = calibration.px_per_mm.ok_or(MeasureError::NoCameraScale)?;
+pub fn px_per_mm_of(calibration: &CalibrationRecord) -> Result<PxPerMmCalibration, RunError> {
+    let px_per_mm = calibration.px_per_mm.ok_or(RunError::NoCameraScale)?;
     Ok(PxPerMmCalibration {
         px_per_mm,
         px_per_mm_sigma: calibration.px_per_mm_sigma.unwrap_or(0.0),
@@ -77,11 +79,7 @@ pub fn px_per_mm_of(calibration: &CalibrationRecord) -> Result<PxPerMmCalibratio
 }
 
 /// Moves the stage to `target_mm` at `speed` and waits until it stops there.
-pub fn move_stage_to(
-    link: &mut Link,
-    target_mm: f64,
-    speed_mm_per_s: f64,
-) -> Result<(), MeasureError> {
+pub fn move_stage_to(link: &mut Link, target_mm: f64, speed_mm_per_s: f64) -> Result<(), RunError> {
     let units = *link.units();
     let target = units.stage_steps(target_mm);
     link.start_stream(200, ChannelSet::ALL)?;
@@ -101,31 +99,52 @@ pub fn move_stage_to(
             return Ok(());
         }
         if host_clock::now_us().saturating_sub(start) > 60_000_000 {
-            return Err(MeasureError::Stage(target_mm));
+            return Err(RunError::Stage(target_mm));
         }
     }
 }
 
-/// Runs the measurement. `make_radius` is called with the pressure set and the stage at
-/// the start position (out of contact), to take the reference frame and start measuring.
+/// Who runs the experiment and what else the record should say.
+#[derive(Debug, Clone, Default)]
+pub struct RunContext {
+    /// `tactile`, `tactile daemon`, ...
+    pub software: String,
+    /// Where the calibration record was read from (none for a fresh in-memory one).
+    pub calibration_path: Option<String>,
+    /// The simulated bench's scenario, for simulated runs.
+    pub scenario: Option<serde_json::Value>,
+    /// The daemon's job number.
+    pub job: Option<u64>,
+    /// Time to let the pressure settle at the start position before the reference frame.
+    pub settle: Duration,
+}
+
+/// What decides a failed run's status: `Failed` unless the caller knows better (the daemon
+/// marks a run it stopped as `Partial`).
+pub type FailureStatus<'a> = &'a dyn Fn(&ExperimentError) -> RecordStatus;
+
+/// Runs one experiment. `make_radius` is called with the pressure set and the stage at the
+/// start position (out of contact), to take the reference frame and start measuring.
 #[allow(clippy::too_many_arguments)]
-pub fn run_measurement<'a>(
+pub fn run_experiment<'a>(
     link: &mut Link,
     calibration: &CalibrationRecord,
     plan: &IndentationPlan,
     record: &RecordDir,
     model: &LutModel,
     lut: &LutInfo,
+    context: &RunContext,
     progress: &indicatif::ProgressBar,
+    failure_status: FailureStatus<'_>,
     make_radius: impl FnOnce(
         &mut Link,
         PxPerMmCalibration,
     ) -> Result<Box<dyn RadiusSource + 'a>, String>,
-) -> Result<MeasurementReport, MeasureError> {
+) -> Result<ExperimentReport, RunError> {
     let proximity =
         *calibration
             .proximity_at(plan.pressure_kpa)
-            .ok_or_else(|| MeasureError::NoProximity {
+            .ok_or_else(|| RunError::NoProximity {
                 pressure_kpa: plan.pressure_kpa,
                 have: calibration
                     .proximity
@@ -136,28 +155,10 @@ pub fn run_measurement<'a>(
             })?;
     let px = px_per_mm_of(calibration)?;
     let zero = calibration.manometer_zero_kpa;
-    let mut meta = serde_json::json!({
-        "software": { "name": "tactile", "version": env!("CARGO_PKG_VERSION") },
-        "protocol_version": link.info().protocol_version,
-        "device": {
-            "serial": link.info().serial.as_str(),
-            "firmware_version": link.info().firmware_version.as_str(),
-            "port": link.port_name(),
-        },
-        "lut": lut,
-        "calibration": calibration,
-        "plan": {
-            "pressure_kpa": plan.pressure_kpa,
-            "start_mm": plan.start_mm,
-            "depth_mm": plan.depth_mm,
-            "speed_mm_per_s": plan.speed_mm_per_s,
-            "repeats": plan.repeats,
-            "stream_rate_hz": plan.stream_rate_hz,
-        },
-        "status": "running",
-    });
-    record.write_json("meta.json", &meta)?;
+    let mut meta = RecordMeta::new(link, calibration, plan, lut, context);
+    meta.write(record)?;
     tracing::info!(pressure_kpa = plan.pressure_kpa, "setting pressure");
+    link.request(Request::Vent { open: false })?;
     link.request(Request::SetLed {
         duty_per_10k: 10_000,
     })?;
@@ -165,8 +166,8 @@ pub fn run_measurement<'a>(
         setpoint_kpa: (plan.pressure_kpa + zero) as f32,
     })?;
     move_stage_to(link, plan.start_mm, plan.speed_mm_per_s.max(1.0))?;
-    link.pump(Duration::from_millis(1000))?;
-    let mut radius = make_radius(link, px).map_err(MeasureError::Camera)?;
+    link.pump(context.settle)?;
+    let mut radius = make_radius(link, px).map_err(RunError::Camera)?;
     let run = run_indentation(
         link,
         radius.as_mut(),
@@ -179,28 +180,40 @@ pub fn run_measurement<'a>(
     let stats = link.stats();
     let (unmeasured, dropped) = radius.failures();
     drop(radius);
+    meta.link = Some(stats);
+    meta.finished_unix_s = Some(unix_now_s());
     let result = match run {
         Ok(r) => r,
         Err(e) => {
-            meta["status"] = serde_json::json!(format!("failed: {e}"));
-            meta["link"] = serde_json::to_value(stats).unwrap_or_default();
-            record.write_json("meta.json", &meta)?;
+            meta.status = failure_status(&e);
+            // The pressure trace, for partial records too.
+            if let Err(p) = fit::plots::write_pressure_trace(&record.dir) {
+                meta.notes.push(format!("pressure trace not plotted: {p}"));
+            }
+            meta.write(record)?;
             return Err(e.into());
         }
     };
-    let (fit, points, plot_problem) =
-        write_curve_and_fit(record, &result, plan.pressure_kpa, model)?;
-    meta["status"] = serde_json::json!("complete");
-    meta["link"] = serde_json::to_value(stats).unwrap_or_default();
-    meta["frames"] = serde_json::json!({
-        "measured": result.frames, "unmeasured": unmeasured, "dropped": dropped
+    meta.frames = Some(FrameCounts {
+        measured: result.frames as u64,
+        unmeasured,
+        dropped,
     });
-    record.write_json("meta.json", &meta)?;
-    let mut notes = Vec::new();
-    if let Some(p) = plot_problem {
-        notes.push(format!("plots could not be written: {p}"));
+    let (fit, points, plot_problem) =
+        match write_curve_and_fit(record, &result, plan.pressure_kpa, model) {
+            Ok(r) => r,
+            Err(e) => {
+                meta.status = RecordStatus::FitFailed(e.to_string());
+                meta.write(record)?;
+                return Err(e.into());
+            }
+        };
+    if let Some(p) = &plot_problem {
+        meta.notes.push(format!("plots could not be written: {p}"));
     }
-    Ok(MeasurementReport {
+    meta.status = RecordStatus::Complete;
+    meta.write(record)?;
+    Ok(ExperimentReport {
         modulus_kpa: fit.modulus_kpa,
         ci95_kpa: fit.ci95_kpa,
         rms_residual_mm: fit.rms_residual_mm,
@@ -212,6 +225,6 @@ pub fn run_measurement<'a>(
         frames_dropped: dropped,
         link: stats,
         fit,
-        notes,
+        notes: meta.notes.clone(),
     })
 }
