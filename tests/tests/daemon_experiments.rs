@@ -201,9 +201,11 @@ fn two_clients_watch_while_a_third_runs_an_experiment() {
             record.display()
         );
     }
-    let meta: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(record.join("meta.json")).unwrap()).unwrap();
-    assert_eq!(meta["status"], "complete");
+    // The daemon's record is written by the same pipeline and schema as `tactile measure`'s.
+    let meta = experiment::record_meta::RecordMeta::read(&record).unwrap();
+    assert_eq!(meta.status, experiment::record_meta::RecordStatus::Complete);
+    assert_eq!(meta.software.name, "tactile daemon");
+    assert!(meta.job.is_some() && meta.calibration_path.is_some());
     b.daemon.shutdown();
     let _ = std::fs::remove_dir_all(&b.dir);
 }

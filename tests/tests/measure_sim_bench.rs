@@ -15,7 +15,7 @@ use experiment::calibration::{
     proximity_sweep, save_record, tare_load,
 };
 use experiment::pipeline::{LutInfo, RunContext, run_experiment};
-use experiment::record_meta::RecordStatus;
+use experiment::record_meta::{RecordMeta, RecordStatus};
 use experiment::records::RecordDir;
 use experiment::simulated::{
     DEMO_MAX_DEPTH_MM, DEMO_RIGID_MESH_LEVEL, DEMO_STEPS, SimRadiusSource, demo_scenario,
@@ -135,12 +135,12 @@ fn calibrate_then_measure_against_the_pty_bench() {
     ] {
         assert!(out.path(f).exists(), "{f}");
     }
-    let meta: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.path("meta.json")).unwrap()).unwrap();
-    assert_eq!(meta["status"], "complete");
-    assert_eq!(
-        meta["calibration"]["px_per_mm"],
-        serde_json::json!(px.px_per_mm)
-    );
+    // The record describes itself in the one schema every caller writes.
+    let meta = RecordMeta::read(&out.dir).unwrap();
+    assert_eq!(meta.status, RecordStatus::Complete);
+    assert_eq!(meta.calibration, stored);
+    assert_eq!(meta.plan, plan);
+    let frames = meta.frames.unwrap();
+    assert_eq!(frames.measured, report.frames as u64);
     let _ = std::fs::remove_dir_all(&dir);
 }
