@@ -2,7 +2,7 @@
 //! renderer) or any other producer thread delivers frames without a device or a file.
 //!
 //! ```
-//! use host::camera::{channel_source, Frame, FrameSource, GrayImage};
+//! use camera::{channel_source, Frame, FrameSource, GrayImage};
 //! let (tx, mut source) = channel_source(4);
 //! let image = GrayImage::new(2, 1, vec![10, 20]).unwrap();
 //! tx.send(Frame::from_gray(image, 0, 0)).unwrap();

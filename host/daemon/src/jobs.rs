@@ -11,7 +11,7 @@ use protocol::Request;
 use super::api::{Event, ExperimentRequest, Job, JobState};
 use super::device_thread::DeviceSource;
 use super::device_thread::{DeviceThread, link_lost};
-use super::fit_worker::summary;
+use super::fit_worker::{model_curve, summary};
 use super::guarded_transport::StopKind;
 use super::live_radius::LiveRadius;
 use experiment::calibration::{CalibrationRecord, ProximityCalibration};
@@ -266,6 +266,7 @@ pub fn run_experiment(dt: &mut DeviceThread, link: &mut Link, job: Job) -> Optio
         units: *link.units(),
         proximity,
         plan,
+        progress: progress.clone(),
         on_progress: &mut on_progress,
     };
     let outcome = pipeline::run_experiment(
@@ -286,6 +287,12 @@ pub fn run_experiment(dt: &mut DeviceThread, link: &mut Link, job: Job) -> Optio
     }
     match outcome {
         Ok(report) => {
+            // The final fit on the live feed, as the running fits before it.
+            let _ = dt.shared.events.send(Event::Fit {
+                fit: summary(&report.fit),
+                model: model_curve(&model, &report.fit, &report.fit_points),
+                final_fit: true,
+            });
             dt.shared
                 .update_job(id, |j| j.fit = Some(summary(&report.fit)));
             dt.finish_job(
@@ -352,6 +359,8 @@ struct FrameBench<'s> {
     units: link::units::SampleUnits,
     proximity: ProximityCalibration,
     plan: IndentationPlan,
+    /// The pipeline's progress bar: its messages ("indentation 2/5") become the job's.
+    progress: indicatif::ProgressBar,
     on_progress: &'s mut dyn FnMut(f64, String),
 }
 
@@ -403,7 +412,7 @@ impl<'s> FrameBench<'s> {
             self.proximity,
             self.plan.pressure_kpa,
             self.plan.start_mm,
-            indicatif::ProgressBar::hidden(),
+            self.progress.clone(),
             &mut *self.on_progress,
         )))
     }

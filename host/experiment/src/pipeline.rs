@@ -17,7 +17,7 @@ use super::record_meta::{FrameCounts, RecordMeta, RecordStatus};
 use super::{ExperimentError, IndentationPlan, RadiusSource, run_indentation};
 use crate::calibration::CalibrationRecord;
 use crate::records::{RecordDir, RecordError, unix_now_s};
-use fit::{LutModel, ModulusFit};
+use fit::{FitPoint, LutModel, ModulusFit};
 use link::{Link, LinkError, LinkStats};
 use vision::px_per_mm::PxPerMmCalibration;
 
@@ -65,6 +65,9 @@ pub struct ExperimentReport {
     pub frames_dropped: u64,
     pub link: LinkStats,
     pub notes: Vec<String>,
+    /// The points the fit used (for a caller that plots or publishes them).
+    #[serde(skip)]
+    pub fit_points: Vec<FitPoint>,
 }
 
 /// The camera scale stored in a calibration record.
@@ -219,6 +222,7 @@ pub fn run_experiment<'a>(
         rms_residual_mm: fit.rms_residual_mm,
         record_dir: record.dir.display().to_string(),
         points: points.len(),
+        fit_points: points,
         samples: result.samples,
         frames: result.frames,
         frames_unmeasured: unmeasured,
