@@ -9,6 +9,7 @@
 
 pub mod cobs;
 pub mod crc16;
+pub mod endpoints;
 pub mod frame;
 pub mod messages;
 

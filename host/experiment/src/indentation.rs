@@ -2,7 +2,7 @@
 
 use std::time::Duration;
 
-use protocol::{ChannelSet, Request, StatusFlags};
+use protocol::{ChannelSet, StatusFlags, endpoints};
 
 use super::pairing::{DisplacementSample, PairedPoint, RadiusSample, pair_frames};
 use crate::calibration::ProximityCalibration;
@@ -170,7 +170,7 @@ fn move_stage(
 ) -> Result<(), ExperimentError> {
     let units = *link.units();
     let target = units.stage_steps(target_mm);
-    link.request(Request::MoveStage {
+    link.call(endpoints::MoveStage {
         target_steps: target,
         speed_steps_per_s: (speed_mm_per_s * units.stage_steps_per_mm()).round() as u32,
         accel_steps_per_s2: (50.0 * units.stage_steps_per_mm()).round() as u32,
@@ -228,7 +228,7 @@ pub fn run_indentation(
     link.start_stream(plan.stream_rate_hz, ChannelSet::ALL)?;
     // 1. pressure
     progress.set_message(format!("settling {} kPa", plan.pressure_kpa));
-    link.request(Request::SetPressure {
+    link.call(endpoints::SetPressure {
         setpoint_kpa: (plan.pressure_kpa + manometer_zero_kpa) as f32,
     })?;
     let settle_start = host_clock::now_us();
@@ -274,7 +274,7 @@ pub fn run_indentation(
         plan.speed_mm_per_s.max(1.0),
         plan.start_mm.abs(),
     )?;
-    link.request(Request::TareLoad)?;
+    link.call(endpoints::TareLoad)?;
     // 3. cycles
     let mut cycles: Vec<(f64, f64)> = Vec::new();
     progress.set_length(u64::from(plan.repeats));
@@ -314,7 +314,7 @@ pub fn run_indentation(
         progress.inc(1);
     }
     link.stop_stream()?;
-    link.request(Request::PressureOff)?;
+    link.call(endpoints::PressureOff)?;
     for f in radius.finish(link.clock()) {
         streams
             .frames

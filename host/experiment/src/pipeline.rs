@@ -10,7 +10,7 @@
 
 use std::time::Duration;
 
-use protocol::{ChannelSet, Request, StatusFlags};
+use protocol::{ChannelSet, StatusFlags, endpoints};
 
 use super::analysis::{AnalysisError, write_curve_and_fit};
 use super::record_meta::{FrameCounts, RecordMeta, RecordStatus};
@@ -86,7 +86,7 @@ pub fn move_stage_to(link: &mut Link, target_mm: f64, speed_mm_per_s: f64) -> Re
     let units = *link.units();
     let target = units.stage_steps(target_mm);
     link.start_stream(200, ChannelSet::ALL)?;
-    link.request(Request::MoveStage {
+    link.call(endpoints::MoveStage {
         target_steps: target,
         speed_steps_per_s: (speed_mm_per_s * units.stage_steps_per_mm()).round() as u32,
         accel_steps_per_s2: (50.0 * units.stage_steps_per_mm()).round() as u32,
@@ -161,11 +161,11 @@ pub fn run_experiment<'a>(
     let mut meta = RecordMeta::new(link, calibration, plan, lut, context);
     meta.write(record)?;
     tracing::info!(pressure_kpa = plan.pressure_kpa, "setting pressure");
-    link.request(Request::Vent { open: false })?;
-    link.request(Request::SetLed {
+    link.call(endpoints::Vent { open: false })?;
+    link.call(endpoints::SetLed {
         duty_per_10k: 10_000,
     })?;
-    link.request(Request::SetPressure {
+    link.call(endpoints::SetPressure {
         setpoint_kpa: (plan.pressure_kpa + zero) as f32,
     })?;
     move_stage_to(link, plan.start_mm, plan.speed_mm_per_s.max(1.0))?;

@@ -7,6 +7,7 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
+use protocol::endpoints::{self, Endpoint};
 use protocol::{
     ChannelSet, DeviceInfo, DeviceMessage, FaultReport, FrameDecoder, FrameError, MAX_FRAME_LEN,
     NackCode, PROTOCOL_VERSION, Reply, Request, RequestFrame, Sample, Status, encode_frame,
@@ -274,8 +275,19 @@ impl Link {
     }
 
     /// Sends `request` and waits for its Ack, re-sending on timeout; a Nack is an error.
+    /// Prefer [`Link::call`], whose reply is typed.
     pub fn request(&mut self, request: Request) -> Result<Reply, LinkError> {
         self.request_raw(request)
+    }
+
+    /// Sends a typed request (`protocol::endpoints`) and returns its typed reply:
+    /// `link.call(GetStatus)` is a [`Status`], `link.call(SetPressure { .. })` is `()`.
+    pub fn call<E: Endpoint>(&mut self, request: E) -> Result<E::Reply, LinkError> {
+        let reply = self.request_raw(request.into())?;
+        E::reply(reply).map_err(|other| LinkError::UnexpectedReply {
+            request: E::NAME,
+            reply: format!("{other:?}"),
+        })
     }
 
     fn request_raw(&mut self, request: Request) -> Result<Reply, LinkError> {
@@ -347,19 +359,14 @@ impl Link {
     /// Maps the clocks with `n` synchronous ping round trips.
     pub fn sync_clock(&mut self, n: usize) -> Result<(), LinkError> {
         for _ in 0..n {
-            let reply = self.request(Request::Ping {
+            let pong = self.call(endpoints::Ping {
                 host_time_us: host_clock::now_us(),
             })?;
             let t1 = host_clock::now_us();
             self.stats.pings += 1;
-            if let Reply::Pong {
-                host_time_us,
-                device_time_us,
-            } = reply
-            {
-                // The echoed host time identifies the attempt that was answered.
-                self.clock.add_round_trip(host_time_us, device_time_us, t1);
-            }
+            // The echoed host time identifies the attempt that was answered.
+            self.clock
+                .add_round_trip(pong.host_time_us, pong.device_time_us, t1);
         }
         Ok(())
     }
@@ -486,23 +493,16 @@ impl Link {
     /// Starts the sample stream; loss counting restarts with it.
     pub fn start_stream(&mut self, rate_hz: u16, channels: ChannelSet) -> Result<(), LinkError> {
         self.next_block_seq = None;
-        self.request(Request::StartStream { rate_hz, channels })
-            .map(|_| ())
+        self.call(endpoints::StartStream { rate_hz, channels })
     }
 
     pub fn stop_stream(&mut self) -> Result<(), LinkError> {
-        self.request(Request::StopStream).map(|_| ())
+        self.call(endpoints::StopStream)
     }
 
     /// The controller's state.
     pub fn status(&mut self) -> Result<Status, LinkError> {
-        match self.request(Request::GetStatus)? {
-            Reply::Status(s) => Ok(s),
-            other => Err(LinkError::UnexpectedReply {
-                request: "GetStatus",
-                reply: format!("{other:?}"),
-            }),
-        }
+        self.call(endpoints::GetStatus)
     }
 }
 

@@ -6,7 +6,7 @@
 
 use link::loopback::{LoopbackDevice, LoopbackFaults, SimpleBench};
 use link::{Link, LinkConfig, LinkError};
-use protocol::{ChannelSet, PROTOCOL_VERSION, Reply, Request};
+use protocol::{ChannelSet, PROTOCOL_VERSION, Reply, Request, endpoints};
 use std::time::Duration;
 
 fn device(faults: LoopbackFaults) -> Box<LoopbackDevice> {
@@ -62,9 +62,13 @@ fn nack_is_an_error_naming_the_request() {
     let mut link = Link::connect(device(LoopbackFaults::default()), LinkConfig::default()).unwrap();
     // 50 kPa is above the firmware's 18 kPa setpoint limit
     let err = link
-        .request(Request::SetPressure { setpoint_kpa: 50.0 })
+        .call(endpoints::SetPressure { setpoint_kpa: 50.0 })
         .unwrap_err();
     assert!(err.to_string().contains("SetPressure"), "{err}");
+    // The typed call returns the reply's own type (the refused setpoint changed nothing);
+    // the raw request returns the wire's Reply.
+    let status: protocol::Status = link.call(endpoints::GetStatus).unwrap();
+    assert_eq!(status.setpoint_kpa, 0.0);
     assert!(matches!(
         link.request(Request::GetStatus).unwrap(),
         Reply::Status(_)

@@ -12,7 +12,7 @@
 
 use std::time::Duration;
 
-use protocol::{ChannelSet, Request, StatusFlags};
+use protocol::{ChannelSet, StatusFlags, endpoints};
 use serde::{Deserialize, Serialize};
 
 use super::proximity::{ProximityCalibration, ProximityError};
@@ -35,8 +35,8 @@ pub enum CalibrationError {
 pub fn manometer_zero_kpa(link: &mut Link, duration: Duration) -> Result<f64, CalibrationError> {
     let units = *link.units();
     link.start_stream(1000, ChannelSet::ALL)?;
-    link.request(Request::PressureOff)?;
-    link.request(Request::Vent { open: true })?;
+    link.call(endpoints::PressureOff)?;
+    link.call(endpoints::Vent { open: true })?;
     link.pump(Duration::from_millis(200))?;
     link.drain_samples();
     link.pump(duration)?;
@@ -46,7 +46,7 @@ pub fn manometer_zero_kpa(link: &mut Link, duration: Duration) -> Result<f64, Ca
         .filter_map(|s| s.sample.manometer_counts)
         .map(|c| units.manometer_kpa(c))
         .collect();
-    link.request(Request::Vent { open: false })?;
+    link.call(endpoints::Vent { open: false })?;
     link.stop_stream()?;
     if zero.is_empty() {
         return Err(CalibrationError::Procedure(
@@ -62,7 +62,7 @@ pub fn tare_load(link: &mut Link) -> Result<f64, CalibrationError> {
     let units = *link.units();
     link.start_stream(1000, ChannelSet::ALL)?;
     link.pump(Duration::from_millis(200))?;
-    link.request(Request::TareLoad)?;
+    link.call(endpoints::TareLoad)?;
     link.pump(Duration::from_millis(150))?;
     link.drain_samples();
     link.pump(Duration::from_millis(500))?;
@@ -115,7 +115,7 @@ fn move_and_collect(
 ) -> Result<Vec<protocol::Sample>, CalibrationError> {
     let units = *link.units();
     let target = units.stage_steps(target_mm);
-    link.request(Request::MoveStage {
+    link.call(endpoints::MoveStage {
         target_steps: target,
         speed_steps_per_s: (speed_mm_per_s * units.stage_steps_per_mm()).round() as u32,
         accel_steps_per_s2: (50.0 * units.stage_steps_per_mm()).round() as u32,
@@ -184,21 +184,21 @@ pub fn proximity_sweep(
 ) -> Result<SweepData, CalibrationError> {
     let units = *link.units();
     link.start_stream(1000, ChannelSet::ALL)?;
-    link.request(Request::Vent { open: false })?;
-    link.request(Request::SetPressure {
+    link.call(endpoints::Vent { open: false })?;
+    link.call(endpoints::SetPressure {
         setpoint_kpa: (plan.pressure_kpa + manometer_zero_kpa) as f32,
     })?;
     progress.set_message(format!("rigid sweep at {} kPa", plan.pressure_kpa));
     move_and_collect(link, plan.start_mm, 2.0, progress)?;
     link.pump(Duration::from_millis(800))?;
     link.drain_samples();
-    link.request(Request::TareLoad)?;
+    link.call(endpoints::TareLoad)?;
     link.pump(Duration::from_millis(200))?;
     link.drain_samples();
     let sweep = move_and_collect(link, plan.end_mm, plan.speed_mm_per_s, progress)?;
     move_and_collect(link, plan.start_mm, 2.0, progress)?;
     link.stop_stream()?;
-    link.request(Request::PressureOff)?;
+    link.call(endpoints::PressureOff)?;
     let mut data = SweepData {
         pressure_kpa: plan.pressure_kpa,
         ..SweepData::default()
