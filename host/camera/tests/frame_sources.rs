@@ -14,7 +14,7 @@ use camera::{
 use host_clock::{map_clock_us, monotonic_to_host_us};
 use std::path::PathBuf;
 use std::time::Duration;
-use vision::SyntheticScene;
+use testkit::SyntheticScene;
 
 fn tmp(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("vision_fs_{}_{name}", std::process::id()));

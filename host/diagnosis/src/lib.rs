@@ -30,7 +30,6 @@ pub mod signatures;
 #[cfg(feature = "sim")]
 pub mod simulate;
 pub mod stats;
-pub mod synthetic;
 pub mod tables;
 pub mod verdict;
 

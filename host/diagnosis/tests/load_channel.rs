@@ -13,8 +13,8 @@ use diagnosis::fitting::fit;
 use diagnosis::load_channel::LoadChannel;
 use diagnosis::model::{Channel, Model};
 use diagnosis::noise_model::NoiseModel;
-use diagnosis::synthetic::{SyntheticSpec, generate};
 use diagnosis::tables::shipped_tables;
+use testkit::synthetic_curves::{SyntheticSpec, generate};
 
 const TRUE_MODULUS_KPA: f64 = 170.0;
 const TRUE_MU: f64 = 0.3;

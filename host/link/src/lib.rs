@@ -1,7 +1,7 @@
 //! The typed client of the device protocol (docs/protocol.md):
 //!
-//! - [`transport`]: the byte pipe ([`Transport`]): a serial port ([`SerialTransport`]) or an
-//!   in-process device ([`loopback`]);
+//! - [`transport`]: the byte pipe ([`Transport`]): a serial port ([`SerialTransport`]) or
+//!   anything else that moves bytes (the test kit's in-process device);
 //! - [`client`]: [`Link`], the handshake, requests with sequence numbers, timeouts and
 //!   bounded retries, heartbeats, the sample stream with loss counting;
 //! - [`clock_map`]: host <-> device clock mapping from ping round trips;
@@ -9,7 +9,6 @@
 
 pub mod client;
 pub mod clock_map;
-pub mod loopback;
 pub mod transport;
 pub mod units;
 

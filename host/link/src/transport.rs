@@ -1,6 +1,6 @@
 //! The byte pipe under the link: anything that can write bytes and read them with a timeout.
 //! The real one is a serial port (USB CDC-ACM on the bench, a PTY for hil-sim); tests use
-//! an in-process device ([`super::loopback`]).
+//! an in-process device (the test kit's `loopback_device`).
 
 use std::io::{Read, Write};
 use std::time::Duration;

@@ -4,10 +4,10 @@
 
 #![allow(clippy::unwrap_used)] // tests may unwrap: a panic fails the test with its message
 
-use link::loopback::{LoopbackDevice, LoopbackFaults, SimpleBench};
 use link::{Link, LinkConfig, LinkError};
 use protocol::{ChannelSet, PROTOCOL_VERSION, Reply, Request, endpoints};
 use std::time::Duration;
+use testkit::loopback_device::{LoopbackDevice, LoopbackFaults, SimpleBench};
 
 fn device(faults: LoopbackFaults) -> Box<LoopbackDevice> {
     // device clock 3 s ahead of the link's epoch and 150 ppm fast

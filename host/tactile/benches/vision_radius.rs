@@ -6,7 +6,8 @@
 use camera::{Frame, PixelFormat, encode_gray_jpeg};
 use criterion::{Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
-use vision::{ContactRadiusConfig, ContactRadiusEstimator, SyntheticDisc, SyntheticScene};
+use testkit::{SyntheticDisc, SyntheticScene};
+use vision::{ContactRadiusConfig, ContactRadiusEstimator};
 
 fn bench_radius(c: &mut Criterion) {
     for radius in [60.0, 100.0, 170.0] {

@@ -13,9 +13,8 @@ use camera::write_pgm;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::time::Instant;
-use vision::{
-    ContactRadiusConfig, ContactRadiusEstimator, SeededRng, SyntheticDisc, SyntheticScene,
-};
+use testkit::{SeededRng, SyntheticDisc, SyntheticScene};
+use vision::{ContactRadiusConfig, ContactRadiusEstimator};
 
 fn main() -> anyhow::Result<()> {
     let mut args = std::env::args().skip(1);

@@ -6,7 +6,8 @@
 use camera::{Frame, PixelFormat, encode_gray_jpeg};
 use std::hint::black_box;
 use std::time::Instant;
-use vision::{ContactRadiusConfig, ContactRadiusEstimator, SyntheticDisc, SyntheticScene};
+use testkit::{SyntheticDisc, SyntheticScene};
+use vision::{ContactRadiusConfig, ContactRadiusEstimator};
 
 /// Nanoseconds this thread has spent on a CPU.
 fn thread_cpu_ns() -> Option<u64> {

@@ -8,8 +8,8 @@ use std::process::Command;
 
 use diagnosis::candidates::{Candidate, EffectKind};
 use diagnosis::model::Model;
-use diagnosis::synthetic::{SyntheticSpec, generate};
 use diagnosis::tables::shipped_tables;
+use testkit::synthetic_curves::{SyntheticSpec, generate};
 
 fn tactile() -> Command {
     Command::new(env!("CARGO_BIN_EXE_tactile"))

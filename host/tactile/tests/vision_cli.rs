@@ -4,7 +4,7 @@
 
 use camera::{encode_gray_jpeg, write_pgm, write_png};
 use std::process::Command;
-use vision::{SyntheticDisc, SyntheticScene};
+use testkit::{SyntheticDisc, SyntheticScene};
 
 fn tactile() -> Command {
     Command::new(env!("CARGO_BIN_EXE_tactile"))

@@ -6,7 +6,6 @@ pub mod ellipse_fit;
 pub mod gray_image;
 pub mod linear_solve;
 pub mod px_per_mm;
-pub mod synthetic_frame;
 
 pub use contact_radius::{
     ContactDisc, ContactRadius, ContactRadiusConfig, ContactRadiusEstimator, VisionError,
@@ -15,4 +14,3 @@ pub use contact_radius::{
 pub use ellipse_fit::{Ellipse, fit_ellipse};
 pub use gray_image::{GrayImage, GraySizeError};
 pub use px_per_mm::{PxPerMmCalibration, PxPerMmError};
-pub use synthetic_frame::{SeededRng, SyntheticDisc, SyntheticScene};

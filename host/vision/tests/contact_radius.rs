@@ -5,7 +5,8 @@
 
 #![allow(clippy::unwrap_used)] // tests may unwrap: a panic fails the test with its message
 
-use vision::{ContactRadiusConfig, SeededRng, SyntheticDisc, SyntheticScene, contact_radius};
+use testkit::{SeededRng, SyntheticDisc, SyntheticScene};
+use vision::{ContactRadiusConfig, contact_radius};
 
 /// A random scene inside the target envelope.
 fn random_scene(rng: &mut SeededRng, contrast_abs: f64) -> SyntheticScene {

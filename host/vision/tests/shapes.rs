@@ -3,10 +3,8 @@
 
 #![allow(clippy::unwrap_used)] // tests may unwrap: a panic fails the test with its message
 
-use vision::{
-    ContactRadiusConfig, ContactRadiusEstimator, PxPerMmCalibration, SyntheticDisc, SyntheticScene,
-    contact_radius,
-};
+use testkit::{SyntheticDisc, SyntheticScene};
+use vision::{ContactRadiusConfig, ContactRadiusEstimator, PxPerMmCalibration, contact_radius};
 
 fn measure(scene: &SyntheticScene, seed: u64) -> vision::ContactRadius {
     let (reference, frame) = scene.render_pair(seed);

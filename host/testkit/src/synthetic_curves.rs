@@ -1,11 +1,11 @@
 //! Curves generated from the tables themselves with known noise (no FE solve, no simulator):
 //! for tests of the statistics, where the model is exact and only the noise is random. The
-//! hidden-effect studies use [`super::simulate`] (hil-sim's truth) instead.
+//! hidden-effect studies use `diagnosis::simulate` (hil-sim's truth) instead.
 
-use super::candidates::{Candidate, predict};
-use super::data::{Point, sort_points};
-use super::model::{Channel, Model};
-use super::stats::Gauss;
+use diagnosis::candidates::{Candidate, predict};
+use diagnosis::data::{Point, sort_points};
+use diagnosis::model::{Channel, Model};
+use diagnosis::stats::Gauss;
 
 /// What to generate.
 #[derive(Debug, Clone, PartialEq)]

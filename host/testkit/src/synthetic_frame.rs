@@ -16,7 +16,7 @@
 //! `0.5 erfc((|q| - R(theta)) / (sigma sqrt 2))` along each direction, accurate to
 //! O(sigma^2 / R) — for shape tests, not for sub-0.1-px radius tests.
 
-use crate::GrayImage;
+use vision::GrayImage;
 
 /// SplitMix64 (Steele, Lea, Flood 2014) with Box-Muller normals: small, seeded, portable.
 #[derive(Debug, Clone)]

@@ -1,8 +1,7 @@
 //! An in-process device: the real `firmware::Controller` behind a [`Transport`], ticked in
 //! real time (device time = offset + (1 + drift) * elapsed host time, a tick every
-//! [`firmware::TICK_PERIOD_US`]), with a small bench plant and injectable faults. Used by
-//! the link's tests and as the honest fallback device when no simulator or hardware is
-//! available; it is not hil-sim (no finite-element contact, no camera).
+//! [`firmware::TICK_PERIOD_US`]), with a small bench plant and injectable faults. For the
+//! link's tests; it is not hil-sim (no finite-element contact, no camera).
 
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
@@ -10,7 +9,7 @@ use std::time::{Duration, Instant};
 use firmware::{Controller, ControllerConfig, Outputs, RawInputs, TICK_PERIOD_US};
 use protocol::{FrameDecoder, MAX_FRAME_LEN, RequestFrame};
 
-use super::transport::{Transport, TransportError};
+use link::{Transport, TransportError};
 
 /// The physics behind the controller's inputs.
 pub trait LoopbackPlant: Send {
