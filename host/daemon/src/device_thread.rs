@@ -368,7 +368,7 @@ impl DeviceThread {
                 }
                 continue;
             }
-            if let Err(e) = link.pump(Duration::from_millis(20)) {
+            if let Err(e) = link.receive_for(Duration::from_millis(20)) {
                 return ServeEnd::Lost(e.to_string());
             }
             link.drain_samples();

@@ -107,7 +107,7 @@ fn collect(
     frames_into: &mut Vec<RadiusSample>,
     duration: Duration,
 ) -> Result<(), ExperimentError> {
-    let r = link.pump(duration);
+    let r = link.receive_for(duration);
     let fresh = link.drain_samples();
     let now = host_clock::now_us();
     if fresh.is_empty() {

@@ -93,7 +93,7 @@ pub fn move_stage_to(link: &mut Link, target_mm: f64, speed_mm_per_s: f64) -> Re
     })?;
     let start = host_clock::now_us();
     loop {
-        link.pump(Duration::from_millis(50))?;
+        link.receive_for(Duration::from_millis(50))?;
         if link.drain_samples().last().is_some_and(|s| {
             s.sample.stage_steps == Some(target)
                 && !s.sample.status.contains(StatusFlags::STAGE_MOVING)
@@ -169,7 +169,7 @@ pub fn run_experiment<'a>(
         setpoint_kpa: (plan.pressure_kpa + zero) as f32,
     })?;
     move_stage_to(link, plan.start_mm, plan.speed_mm_per_s.max(1.0))?;
-    link.pump(context.settle)?;
+    link.receive_for(context.settle)?;
     let mut radius = make_radius(link, px).map_err(RunError::Camera)?;
     let run = run_indentation(
         link,

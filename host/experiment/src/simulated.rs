@@ -229,7 +229,7 @@ pub fn reference_frame(
     bench: &BenchHandle,
     settle: Duration,
 ) -> Result<GrayImage, SimRunError> {
-    link.pump(settle)?;
+    link.receive_for(settle)?;
     let mut newest = None;
     while let Ok(f) = bench.frames.try_recv() {
         newest = Some(f);
@@ -238,7 +238,7 @@ pub fn reference_frame(
         if newest.is_some() {
             break;
         }
-        link.pump(Duration::from_millis(20))?;
+        link.receive_for(Duration::from_millis(20))?;
         while let Ok(f) = bench.frames.try_recv() {
             newest = Some(f);
         }

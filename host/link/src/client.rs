@@ -474,7 +474,7 @@ impl Link {
     }
 
     /// Drives the link for `duration`: reads samples, sends heartbeats.
-    pub fn pump(&mut self, duration: Duration) -> Result<(), LinkError> {
+    pub fn receive_for(&mut self, duration: Duration) -> Result<(), LinkError> {
         let deadline = host_clock::now_us() + duration.as_micros() as u64;
         loop {
             let now = host_clock::now_us();

@@ -80,7 +80,7 @@ fn stream_at_2_khz_arrives_complete_and_clock_maps_device_time() {
     let mut link = Link::connect(device(LoopbackFaults::default()), LinkConfig::default()).unwrap();
     link.start_stream(2000, ChannelSet::ALL).unwrap();
     let t0 = host_clock::now_us();
-    link.pump(Duration::from_millis(1500)).unwrap();
+    link.receive_for(Duration::from_millis(1500)).unwrap();
     link.stop_stream().unwrap();
     let samples = link.drain_samples();
     let stats = link.stats();
@@ -130,7 +130,7 @@ fn corrupted_bytes_are_counted_as_lost_blocks_not_errors() {
     )
     .unwrap();
     link.start_stream(1000, ChannelSet::ALL).unwrap();
-    link.pump(Duration::from_millis(800)).unwrap();
+    link.receive_for(Duration::from_millis(800)).unwrap();
     link.stop_stream().unwrap();
     let stats = link.stats();
     assert!(stats.frame_errors > 0, "{stats:?}");
@@ -149,7 +149,7 @@ fn unplug_mid_stream_is_a_disconnect_and_keeps_what_arrived() {
     )
     .unwrap();
     link.start_stream(1000, ChannelSet::ALL).unwrap();
-    let err = link.pump(Duration::from_secs(3)).unwrap_err();
+    let err = link.receive_for(Duration::from_secs(3)).unwrap_err();
     assert!(err.is_disconnect(), "{err}");
     assert!(err.to_string().contains("disconnected"), "{err}");
     let kept = link.drain_samples();
@@ -162,7 +162,7 @@ fn pressure_setpoint_is_reached_with_heartbeats_from_the_pump_loop() {
     link.request(Request::SetPressure { setpoint_kpa: 6.0 })
         .unwrap();
     // 2 s > the 1 s heartbeat timeout: only the pump loop's pings keep the pump running
-    link.pump(Duration::from_secs(2)).unwrap();
+    link.receive_for(Duration::from_secs(2)).unwrap();
     let status = link.status().unwrap();
     assert!(status.faults.is_empty(), "{status:?}");
     assert!((status.pressure_kpa - 6.0).abs() < 0.5, "{status:?}");

@@ -65,15 +65,9 @@ impl SeededRng {
     }
 }
 
-/// erf(x) by Abramowitz & Stegun 7.1.26, |error| <= 1.5e-7.
+/// erf(x) = 1 - erfc(x), with the diagnosis's erfc (fractional error < 1.2e-7).
 pub fn erf(x: f64) -> f64 {
-    let t = 1.0 / (1.0 + 0.327_591_1 * x.abs());
-    let poly = t
-        * (0.254_829_592
-            + t * (-0.284_496_736
-                + t * (1.421_413_741 + t * (-1.453_152_027 + t * 1.061_405_429))));
-    let y = 1.0 - poly * (-x * x).exp();
-    if x >= 0.0 { y } else { -y }
+    1.0 - diagnosis::stats::erfc(x)
 }
 
 /// Tabulated radial profile of a disc of radius `r` blurred by a Gaussian of `sigma`.

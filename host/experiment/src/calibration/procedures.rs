@@ -37,9 +37,9 @@ pub fn manometer_zero_kpa(link: &mut Link, duration: Duration) -> Result<f64, Ca
     link.start_stream(1000, ChannelSet::ALL)?;
     link.call(endpoints::PressureOff)?;
     link.call(endpoints::Vent { open: true })?;
-    link.pump(Duration::from_millis(200))?;
+    link.receive_for(Duration::from_millis(200))?;
     link.drain_samples();
-    link.pump(duration)?;
+    link.receive_for(duration)?;
     let zero: Vec<f64> = link
         .drain_samples()
         .iter()
@@ -61,11 +61,11 @@ pub fn manometer_zero_kpa(link: &mut Link, duration: Duration) -> Result<f64, Ca
 pub fn tare_load(link: &mut Link) -> Result<f64, CalibrationError> {
     let units = *link.units();
     link.start_stream(1000, ChannelSet::ALL)?;
-    link.pump(Duration::from_millis(200))?;
+    link.receive_for(Duration::from_millis(200))?;
     link.call(endpoints::TareLoad)?;
-    link.pump(Duration::from_millis(150))?;
+    link.receive_for(Duration::from_millis(150))?;
     link.drain_samples();
-    link.pump(Duration::from_millis(500))?;
+    link.receive_for(Duration::from_millis(500))?;
     let loads: Vec<f64> = link
         .drain_samples()
         .iter()
@@ -124,7 +124,7 @@ fn move_and_collect(
     let start = host_clock::now_us();
     let limit_us = 30_000_000 + (60.0 / speed_mm_per_s.max(0.01) * 1e6) as u64;
     loop {
-        link.pump(Duration::from_millis(50))?;
+        link.receive_for(Duration::from_millis(50))?;
         got.extend(link.drain_samples().into_iter().map(|s| s.sample));
         if let Some(s) = got.last() {
             if let Some(steps) = s.stage_steps {
@@ -132,7 +132,7 @@ fn move_and_collect(
             }
             if s.status.contains(StatusFlags::FAULT) {
                 // the fault report follows the flagged sample
-                let _ = link.pump(Duration::from_millis(100));
+                let _ = link.receive_for(Duration::from_millis(100));
                 let latched = link.faults().last().map_or(0, |f| f.latched.0);
                 return Err(CalibrationError::Procedure(format!(
                     "device fault during the sweep: {} (status {:#06x})",
@@ -190,10 +190,10 @@ pub fn proximity_sweep(
     })?;
     progress.set_message(format!("rigid sweep at {} kPa", plan.pressure_kpa));
     move_and_collect(link, plan.start_mm, 2.0, progress)?;
-    link.pump(Duration::from_millis(800))?;
+    link.receive_for(Duration::from_millis(800))?;
     link.drain_samples();
     link.call(endpoints::TareLoad)?;
-    link.pump(Duration::from_millis(200))?;
+    link.receive_for(Duration::from_millis(200))?;
     link.drain_samples();
     let sweep = move_and_collect(link, plan.end_mm, plan.speed_mm_per_s, progress)?;
     move_and_collect(link, plan.start_mm, 2.0, progress)?;
