@@ -21,8 +21,9 @@ pub fn default_lut_path() -> PathBuf {
     data_dir().join("default.lut")
 }
 
-/// The table the simulated bench's sample is made of (mesh level -1, the settings of
-/// hil-sim's built-in sample): `sim-bench.lut`, the demo's and the simulated daemon's fit table.
+/// The table the simulated bench's samples are made of, `sim-bench.lut`: the production
+/// grid solved on a finer mesh (level 1) than the fit's table (level 0), so that the
+/// simulated truth does not share the fit's discretisation error.
 pub fn sim_bench_lut_path() -> PathBuf {
     data_dir().join("sim-bench.lut")
 }

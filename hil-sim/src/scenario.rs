@@ -90,10 +90,11 @@ fn default_max_depth() -> f64 {
     2.0
 }
 
+/// The sample's mechanics default to the shipped simulation table (finer than the fit's).
 impl Default for MechanicsSource {
     fn default() -> Self {
         Self::Lut {
-            path: fem_core::shipped::default_lut_path(),
+            path: fem_core::shipped::sim_bench_lut_path(),
         }
     }
 }

@@ -9,7 +9,7 @@
 
 #![allow(clippy::unwrap_used)] // tests may unwrap: a panic fails the test with its message
 
-use experiment::simulated::{demo_scenario, fixture_lut_path};
+use experiment::simulated::{demo_fit_lut_path, demo_scenario};
 use fem_core::lut::read_lut;
 use fit::{FitOptions, FitPoint, LutModel, fit_modulus};
 use hil_sim::mechanics::{CurveMechanics, MechanicsModel};
@@ -35,7 +35,7 @@ fn fit(model: &LutModel, pts: &[(f64, f64)], p: f64) -> f64 {
 #[test]
 #[ignore = "diagnostic: fem-core solves; release"]
 fn bias_of_each_stage() {
-    let lut = read_lut(&fixture_lut_path()).unwrap().lut;
+    let lut = read_lut(&demo_fit_lut_path()).unwrap().lut;
     let model = LutModel::new(&lut).unwrap();
     for (e, p) in [(60.0, 6.0), (200.0, 6.0), (400.0, 15.0)] {
         for steps in [10usize, 40] {

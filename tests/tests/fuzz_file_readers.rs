@@ -253,7 +253,7 @@ fn check_table(bytes: &[u8]) -> Result<(), String> {
 
 #[test]
 fn fit_table() {
-    let seeds = vec![repo_file("fem-core/data/sim-bench.lut")];
+    let seeds = vec![repo_file("host/fit/tests/data/fit_fixture.lut")];
     fuzz("fit_table", &seeds, check_table);
 }
 
@@ -397,33 +397,10 @@ fn image_frames() {
     fuzz("image_frames", &seeds, check_image);
 }
 
-/// A minimal ELF32 little-endian ARM executable with one loadable segment in flash.
-fn one_segment_elf(paddr: u32, data: &[u8]) -> Vec<u8> {
-    let mut out = vec![0u8; 52 + 32];
-    out[..4].copy_from_slice(b"\x7fELF");
-    out[4] = 1; // ELFCLASS32
-    out[5] = 1; // ELFDATA2LSB
-    out[6] = 1; // EV_CURRENT
-    out[16..18].copy_from_slice(&2u16.to_le_bytes()); // ET_EXEC
-    out[18..20].copy_from_slice(&40u16.to_le_bytes()); // EM_ARM
-    out[20..24].copy_from_slice(&1u32.to_le_bytes());
-    out[28..32].copy_from_slice(&52u32.to_le_bytes()); // e_phoff
-    out[40..42].copy_from_slice(&52u16.to_le_bytes()); // e_ehsize
-    out[42..44].copy_from_slice(&32u16.to_le_bytes()); // e_phentsize
-    out[44..46].copy_from_slice(&1u16.to_le_bytes()); // e_phnum
-    let size = data.len() as u32;
-    let words = [1, 84, paddr, paddr, size, size, 5, 4]; // PT_LOAD at file offset 84
-    for (k, w) in words.iter().enumerate() {
-        out[52 + 4 * k..56 + 4 * k].copy_from_slice(&w.to_le_bytes());
-    }
-    out.extend_from_slice(data);
-    out
-}
-
 #[test]
 fn firmware_elf_and_uf2() {
     let code: Vec<u8> = (0..600u32).map(|i| (i * 13 % 256) as u8).collect();
-    let elf = one_segment_elf(0x1000_0000, &code);
+    let elf = testkit::elf_image::one_segment_elf(0x1000_0000, &code);
     let segments = usb::elf_image::load_segments(&elf).unwrap();
     let uf2 = usb::uf2::FlashImage::from_segments(&segments)
         .unwrap()

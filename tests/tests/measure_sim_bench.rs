@@ -18,8 +18,8 @@ use experiment::pipeline::{LutInfo, RunContext, run_experiment};
 use experiment::record_meta::{RecordMeta, RecordStatus};
 use experiment::records::RecordDir;
 use experiment::simulated::{
-    DEMO_MAX_DEPTH_MM, DEMO_RIGID_MESH_LEVEL, DEMO_STEPS, SimRadiusSource, demo_scenario,
-    fixture_lut_path, px_per_mm_from_reference_disc, reference_frame, rigid_scenario,
+    DEMO_MAX_DEPTH_MM, DEMO_RIGID_MESH_LEVEL, DEMO_STEPS, SimRadiusSource, demo_fit_lut_path,
+    demo_scenario, px_per_mm_from_reference_disc, reference_frame, rigid_scenario,
     start_and_connect,
 };
 use fit::LutModel;
@@ -67,7 +67,7 @@ fn calibrate_then_measure_against_the_pty_bench() {
     assert_eq!(stored, record);
 
     // the measurement, with the stored record
-    let lut_file = fem_core::lut::read_lut(&fixture_lut_path()).unwrap();
+    let lut_file = fem_core::lut::read_lut(&demo_fit_lut_path()).unwrap();
     let model = LutModel::new(&lut_file.lut).unwrap();
     let clock = scenario.clock.clone();
     let (bench, mut link) = start_and_connect(scenario).unwrap();
@@ -87,7 +87,7 @@ fn calibrate_then_measure_against_the_pty_bench() {
         &out,
         &model,
         &LutInfo {
-            path: fixture_lut_path().display().to_string(),
+            path: demo_fit_lut_path().display().to_string(),
             sha256: lut_file.sha256.clone(),
         },
         &RunContext {

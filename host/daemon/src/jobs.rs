@@ -133,7 +133,7 @@ pub fn calibrate_sim(scenario: &hil_sim::scenario::Scenario, dir: &Path) -> Resu
 }
 
 /// The daemon's default simulated bench: the paper's gelatin (200 kPa) with the mechanics
-/// read from `lut` (the table the fit uses, so a simulated run fits its own model).
+/// read from `lut` (normally [`super::sim::sim_lut`], finer than the fit's table).
 #[cfg(feature = "sim")]
 pub fn default_sim_scenario(lut: &Path) -> hil_sim::scenario::Scenario {
     hil_sim::scenario::Scenario {

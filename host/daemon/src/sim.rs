@@ -1,5 +1,5 @@
 //! A daemon on the simulated bench with test-friendly defaults (an ephemeral loopback
-//! port, the shipped table, patient link timeouts): used by the system tests, the
+//! port, the shipped table for the fit, a finer table for the sample, patient link timeouts): used by the system tests, the
 //! benchmarks and `tactile daemon --sim`.
 
 use std::net::SocketAddr;
@@ -18,11 +18,11 @@ pub fn shipped_lut() -> PathBuf {
     fem_core::shipped::default_lut_path()
 }
 
-/// The table of the simulated bench: the demo's fit fixture (a full modulus x pressure
-/// grid; the shipped table lacks one failed curve, which hil-sim's table mechanics
-/// refuse). The simulated sample's mechanics and the fit both use it.
+/// The table the simulated bench's sample is made of: the production grid on a finer mesh
+/// (`fem-core/data/sim-bench.lut`, level 1), so that a simulated run does not fit its own
+/// model; the fit uses the production table ([`shipped_lut`]).
 pub fn sim_lut() -> PathBuf {
-    experiment::simulated::fixture_lut_path()
+    fem_core::shipped::sim_bench_lut_path()
 }
 
 /// Starts hil-sim with `scenario` (default: [`super::jobs::default_sim_scenario`]) and a
@@ -66,7 +66,7 @@ pub fn start_sim_daemon_capped(
         allow_remote: false,
         token_file: token_file.to_path_buf(),
         records_dir: records_dir.to_path_buf(),
-        lut_path: lut,
+        lut_path: shipped_lut(),
         max_connections,
         device: DeviceConfig {
             idle_stream_hz,

@@ -53,6 +53,12 @@ impl Default for FitOptions {
 /// Why the fit failed.
 #[derive(Debug, thiserror::Error)]
 pub enum FitError {
+    #[error(
+        "the best fit lies at the table's {} limit, E2 = {limit_kpa:.0} kPa: the sample is {} than the table covers (measure at another pressure, or use a table with a wider modulus range)",
+        if *upper { "upper" } else { "lower" },
+        if *upper { "stiffer" } else { "softer" }
+    )]
+    AtTableLimit { limit_kpa: f64, upper: bool },
     #[error("too few points to fit: {usable} usable of {total} (need at least 3)")]
     TooFewPoints { usable: usize, total: usize },
     #[error("pressure {p_air_kpa} kPa is outside the table's pressures {min_kpa}..{max_kpa} kPa")]
@@ -554,6 +560,16 @@ impl<'m, 'a> Problem<'m, 'a> {
             // on an inner bracket edge: move the bracket and refit
             let at_lo = (x - lo).abs() < 1e-9 && k0 > 0;
             let at_hi = (x - hi).abs() < 1e-9 && k1 < nodes.len() - 1;
+            // on the table's outer edge the estimate is a clamp, not a minimum
+            let first = nodes[0].ln();
+            let final_node = nodes[nodes.len() - 1].ln();
+            if (x - first).abs() < 1e-9 || (x - final_node).abs() < 1e-9 {
+                let upper = (x - final_node).abs() < 1e-9;
+                return Err(FitError::AtTableLimit {
+                    limit_kpa: x.exp(),
+                    upper,
+                });
+            }
             last = Some(core);
             if at_lo {
                 k = k0;
@@ -841,7 +857,8 @@ mod tests {
     /// to rounding: they are the same polynomial, obtained from the table's node values.
     #[test]
     fn interval_cubics_equal_the_table_interpolation() {
-        let path = fem_core::shipped::sim_bench_lut_path();
+        let path =
+            std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/fit_fixture.lut");
         let lut = fem_core::lut::read_lut(&path).unwrap().lut;
         let model = LutModel::new(&lut).unwrap();
         let points: Vec<FitPoint> = (0..60)

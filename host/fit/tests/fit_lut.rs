@@ -1,4 +1,4 @@
-//! The modulus fit against a real finite-element table (`fem-core/data/sim-bench.lut`,
+//! The modulus fit against a real finite-element table (`tests/data/fit_fixture.lut`,
 //! fem-core at mesh level -1; rebuild with the ignored test in `fixture_build.rs`):
 //! - direct fem-core solves at off-grid moduli (so the table's interpolation bias is part
 //!   of the error) are recovered within 1.5 %;
@@ -10,7 +10,10 @@
 
 use fem_core::lut::{Lut, read_lut};
 use fit::curve_csv::read_curve_csv;
-use fit::{FitOptions, FitPoint, LutModel, fit_modulus, points_from_curve_csv, recommend_pressure};
+use fit::{
+    FitError, FitOptions, FitPoint, LutModel, fit_modulus, points_from_curve_csv,
+    recommend_pressure,
+};
 use std::path::PathBuf;
 
 fn data(name: &str) -> PathBuf {
@@ -20,9 +23,7 @@ fn data(name: &str) -> PathBuf {
 }
 
 fn lut() -> Lut {
-    read_lut(&fem_core::shipped::sim_bench_lut_path())
-        .unwrap()
-        .lut
+    read_lut(&data("fit_fixture.lut")).unwrap().lut
 }
 
 /// splitmix64 + Box–Muller: seeded standard normal deviates.
@@ -237,5 +238,27 @@ fn predicted_sensitivity_matches_the_scatter_of_fits() {
             "p {}: {sd} vs {predicted}",
             s.p_air_kpa
         );
+    }
+}
+
+#[test]
+fn a_sample_beyond_the_table_is_refused_not_clamped() {
+    // Radii 3 % below the stiffest curve's: a sample stiffer than the table covers. The
+    // least-squares optimum lies beyond the last node, so an estimate there would only be
+    // the clamp; the fit says which limit it hit instead.
+    let lut = lut();
+    let model = LutModel::new(&lut).unwrap();
+    let top = *lut.grid.modulus_kpa.last().unwrap();
+    let mut rng = Normal(11);
+    let mut points = synthetic(&model, top, 6.0, 40, 3, 0.002, &mut rng);
+    for p in &mut points {
+        p.a_mm *= 0.97;
+    }
+    match fit_modulus(&model, &points, FitOptions::default()) {
+        Err(FitError::AtTableLimit { upper, limit_kpa }) => {
+            assert!(upper);
+            assert!((limit_kpa / top - 1.0).abs() < 1e-9, "{limit_kpa}");
+        }
+        other => panic!("expected the upper-limit refusal, got {other:?}"),
     }
 }

@@ -2,7 +2,7 @@
 //!
 //! `cargo test -p fit --release --test fixture_build -- --ignored`
 //!
-//! - `fem-core/data/sim-bench.lut`: a real finite-element table (fem-core's solver at mesh
+//! - `tests/data/fit_fixture.lut`: a real finite-element table (fem-core's solver at mesh
 //!   level -1, 40 load steps to h = 1.9 mm) over the default grid's 13 moduli 10–1000 kPa and
 //!   p_air = 6 and 15 kPa, everything else the paper's gelatin experiment;
 //! - `tests/data/fem_truth_E<modulus>_p<pressure>.csv`: direct solves with the same settings
@@ -64,7 +64,7 @@ fn build_fit_fixture() {
         &|r| eprintln!("{} {:.1} s {:?}", r.what, r.seconds, r.failure),
     )
     .unwrap();
-    write_lut(&fem_core::shipped::sim_bench_lut_path(), &lut).unwrap();
+    write_lut(&data_dir().join("fit_fixture.lut"), &lut).unwrap();
     use rayon::prelude::*;
     TRUTHS.par_iter().for_each(|&(e, p)| {
         let params = CurveParams {

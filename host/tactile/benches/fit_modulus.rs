@@ -8,7 +8,8 @@ use fit::{FitOptions, FitPoint, LutModel, fit_modulus};
 use std::hint::black_box;
 
 fn bench(c: &mut Criterion) {
-    let path = fem_core::shipped::sim_bench_lut_path();
+    let path = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../fit/tests/data/fit_fixture.lut");
     let lut = read_lut(&path).expect("fixture table").lut;
     let model = LutModel::new(&lut).expect("slice");
     let (lo, hi) = model.u_s_range_mm(180.0, 6.0).expect("range");

@@ -10,11 +10,8 @@ fn tactile() -> Command {
     Command::new(env!("CARGO_BIN_EXE_tactile"))
 }
 
-/// The fit crate's test data (direct-solve truth curves) and the sim-bench table.
+/// The fit crate's test data: its fixture table and direct-solve truth curves.
 fn data(name: &str) -> PathBuf {
-    if name == "fit_fixture.lut" {
-        return fem_core::shipped::sim_bench_lut_path();
-    }
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("../fit/tests/data")
         .join(name)

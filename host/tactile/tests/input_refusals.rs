@@ -18,7 +18,7 @@ fn scratch(name: &str) -> PathBuf {
 }
 
 fn fixture_lut() -> PathBuf {
-    fem_core::shipped::sim_bench_lut_path()
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../fit/tests/data/fit_fixture.lut")
 }
 
 fn fit(dir: &Path, csv: &str) -> Output {

@@ -5,30 +5,7 @@
 use std::process::Command;
 use usb::uf2::{crc32_mpeg2, parse_uf2};
 
-/// ELF32 LE ARM with one PT_LOAD of `data` at physical address `paddr`.
-fn one_segment_elf(paddr: u32, data: &[u8]) -> Vec<u8> {
-    let mut out = vec![0u8; 52 + 32];
-    out[..7].copy_from_slice(b"\x7fELF\x01\x01\x01");
-    out[18..20].copy_from_slice(&40u16.to_le_bytes());
-    out[28..32].copy_from_slice(&52u32.to_le_bytes());
-    out[42..44].copy_from_slice(&32u16.to_le_bytes());
-    out[44..46].copy_from_slice(&1u16.to_le_bytes());
-    let words = [
-        1u32,
-        84,
-        paddr,
-        paddr,
-        data.len() as u32,
-        data.len() as u32,
-        5,
-        4,
-    ];
-    for (k, w) in words.iter().enumerate() {
-        out[52 + 4 * k..56 + 4 * k].copy_from_slice(&w.to_le_bytes());
-    }
-    out.extend_from_slice(data);
-    out
-}
+use testkit::elf_image::one_segment_elf;
 
 #[test]
 fn uf2_out_writes_the_image_and_warns_without_boot2() {

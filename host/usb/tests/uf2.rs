@@ -4,39 +4,24 @@
 
 #![allow(clippy::unwrap_used)] // tests may unwrap: a panic fails the test with its message
 
+use testkit::elf_image::ProgramHeader;
 use usb::elf_image::{ElfError, LoadSegment, load_segments};
 use usb::uf2::{FlashImage, Uf2Error, crc32_mpeg2, parse_uf2};
 
 /// A minimal ELF32 little-endian ARM executable with the given program headers
 /// (p_type, p_paddr, p_vaddr, data, p_memsz).
 fn elf(phdrs: &[(u32, u32, u32, Vec<u8>, u32)]) -> Vec<u8> {
-    let phoff = 52u32;
-    let data_start = phoff + 32 * phdrs.len() as u32;
-    let mut out = vec![0u8; data_start as usize];
-    out[..4].copy_from_slice(b"\x7fELF");
-    out[4] = 1; // ELFCLASS32
-    out[5] = 1; // ELFDATA2LSB
-    out[6] = 1; // EV_CURRENT
-    out[16..18].copy_from_slice(&2u16.to_le_bytes()); // ET_EXEC
-    out[18..20].copy_from_slice(&40u16.to_le_bytes()); // EM_ARM
-    out[20..24].copy_from_slice(&1u32.to_le_bytes());
-    out[28..32].copy_from_slice(&phoff.to_le_bytes());
-    out[40..42].copy_from_slice(&52u16.to_le_bytes()); // e_ehsize
-    out[42..44].copy_from_slice(&32u16.to_le_bytes()); // e_phentsize
-    out[44..46].copy_from_slice(&(phdrs.len() as u16).to_le_bytes());
-    let mut offset = data_start;
-    for (i, (ty, paddr, vaddr, data, memsz)) in phdrs.iter().enumerate() {
-        let ph = phoff as usize + 32 * i;
-        let words = [*ty, offset, *vaddr, *paddr, data.len() as u32, *memsz, 5, 4];
-        for (k, w) in words.iter().enumerate() {
-            out[ph + 4 * k..ph + 4 * k + 4].copy_from_slice(&w.to_le_bytes());
-        }
-        offset += data.len() as u32;
-    }
-    for (_, _, _, data, _) in phdrs {
-        out.extend_from_slice(data);
-    }
-    out
+    let headers: Vec<ProgramHeader> = phdrs
+        .iter()
+        .map(|(p_type, paddr, vaddr, data, memsz)| ProgramHeader {
+            p_type: *p_type,
+            paddr: *paddr,
+            vaddr: *vaddr,
+            data: data.clone(),
+            memsz: *memsz,
+        })
+        .collect();
+    testkit::elf_image::elf(&headers)
 }
 
 fn boot2() -> Vec<u8> {

@@ -38,8 +38,9 @@ pub struct DaemonArgs {
     /// $XDG_CONFIG_HOME/tactile/daemon.token or ~/.config/tactile/daemon.token.
     #[arg(long)]
     token_file: Option<PathBuf>,
-    /// Lookup table for the fit (default: the shipped fem-core/data/default.lut; with --sim
-    /// the table the simulated sample is made of, fem-core/data/sim-bench.lut).
+    /// Lookup table for the fit (default: the shipped production table,
+    /// fem-core/data/default.lut, with --sim too: the simulated sample is made of the finer
+    /// fem-core/data/sim-bench.lut).
     #[arg(long)]
     lut: Option<PathBuf>,
     /// Stream rate while idle (Hz); experiments use their own.
@@ -116,13 +117,7 @@ pub fn run(args: DaemonArgs) -> ExitCode {
         allow_remote: args.allow_remote,
         token_file: token_file.clone(),
         records_dir: args.records.clone(),
-        lut_path: args.lut.clone().unwrap_or_else(|| {
-            if args.sim {
-                daemon::sim::sim_lut()
-            } else {
-                default_lut()
-            }
-        }),
+        lut_path: args.lut.clone().unwrap_or_else(default_lut),
         max_connections: args.max_connections,
         device: DeviceConfig {
             idle_stream_hz: args.stream_hz,

@@ -66,6 +66,13 @@ pub fn run(args: DemoArgs) -> ExitCode {
                     &report.record_dir,
                     &report.notes,
                 );
+                let truth = report.true_modulus_kpa;
+                let covered = (report.ci95_kpa[0]..=report.ci95_kpa[1]).contains(&truth);
+                println!(
+                    "simulated sample: E2 = {truth:.1} kPa; error {:+.2} %, {} by the interval",
+                    100.0 * (report.modulus_kpa / truth - 1.0),
+                    if covered { "covered" } else { "not covered" }
+                );
             }
             if report.partial {
                 ExitCode::from(1)
