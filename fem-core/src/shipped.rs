@@ -1,4 +1,4 @@
-//! Where the shipped tables (`default.lut`, `sim-bench.lut`, the effect tables) are found: the folder named
+//! Where the shipped tables (`default.lut`, `default-fine.lut`, the effect tables) are found: the folder named
 //! by the environment variable [`DATA_DIR_VAR`] if set, otherwise this crate's `data/`
 //! folder in the source tree the binary was built from.
 
@@ -21,9 +21,9 @@ pub fn default_lut_path() -> PathBuf {
     data_dir().join("default.lut")
 }
 
-/// The table the simulated bench's samples are made of, `sim-bench.lut`: the production
+/// The table the simulated bench's samples are made of, `default-fine.lut`: the production
 /// grid solved on a finer mesh (level 1) than the fit's table (level 0), so that the
 /// simulated truth does not share the fit's discretisation error.
-pub fn sim_bench_lut_path() -> PathBuf {
-    data_dir().join("sim-bench.lut")
+pub fn fine_lut_path() -> PathBuf {
+    data_dir().join("default-fine.lut")
 }

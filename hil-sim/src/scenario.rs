@@ -94,7 +94,7 @@ fn default_max_depth() -> f64 {
 impl Default for MechanicsSource {
     fn default() -> Self {
         Self::Lut {
-            path: fem_core::shipped::sim_bench_lut_path(),
+            path: fem_core::shipped::fine_lut_path(),
         }
     }
 }

@@ -19,10 +19,10 @@ pub fn shipped_lut() -> PathBuf {
 }
 
 /// The table the simulated bench's sample is made of: the production grid on a finer mesh
-/// (`fem-core/data/sim-bench.lut`, level 1), so that a simulated run does not fit its own
+/// (`fem-core/data/default-fine.lut`, level 1), so that a simulated run does not fit its own
 /// model; the fit uses the production table ([`shipped_lut`]).
 pub fn sim_lut() -> PathBuf {
-    fem_core::shipped::sim_bench_lut_path()
+    fem_core::shipped::fine_lut_path()
 }
 
 /// Starts hil-sim with `scenario` (default: [`super::jobs::default_sim_scenario`]) and a

@@ -6,7 +6,7 @@ use std::path::Path;
 use super::IndentationResult;
 use crate::records::{RecordDir, RecordError};
 use fit::curve_csv::{CurveCsv, CurveCsvError, CurveRow, write_curve_csv};
-use fit::{FitError, FitOptions, FitPoint, LutModel, ModulusFit, fit_modulus};
+use fit::{FitError, FitOptions, FitPoint, LutModel, ModulusFit};
 
 #[derive(Debug, thiserror::Error)]
 pub enum AnalysisError {
@@ -70,7 +70,8 @@ pub fn write_curve_and_fit(
         },
     )?;
     let points = fit_points(result, pressure_kpa);
-    let fit = fit_modulus(model, &points, FitOptions::default())?;
+    let fit =
+        fit::discretisation::fit_modulus_with_model_error(model, &points, FitOptions::default())?;
     record.write_json("fit.json", &fit)?;
     let plots = write_plots(&record.dir, model, &points, &fit).err();
     Ok((fit, points, plots))

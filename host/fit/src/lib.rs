@@ -9,6 +9,7 @@
 //! - [`points`]: measured points from a curve CSV.
 
 pub mod curve_csv;
+pub mod discretisation;
 pub mod model;
 pub mod modulus;
 pub mod plots;

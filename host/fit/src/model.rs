@@ -18,6 +18,11 @@ impl<'a> LutModel<'a> {
         })
     }
 
+    /// The table behind the model.
+    pub fn lut(&self) -> &'a Lut {
+        self.lut
+    }
+
     /// Modulus axis of the table (kPa).
     pub fn moduli_kpa(&self) -> &[f64] {
         &self.lut.grid.modulus_kpa

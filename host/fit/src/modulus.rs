@@ -143,6 +143,10 @@ pub struct ModulusFit {
     pub modulus_linear_interpolation_kpa: f64,
     /// Half-width (in ln E2) added in quadrature for the table's interpolation error.
     pub interpolation_half_width_ln: f64,
+    /// The model's discretisation term (the estimated bias ln E - ln E(finer mesh)), added in
+    /// quadrature to the interval when a finer table was available
+    /// ([`crate::discretisation`]).
+    pub discretisation_bias_ln: Option<f64>,
     pub load_channel_used: bool,
     pub rms_residual_load_n: Option<f64>,
 }
@@ -844,6 +848,7 @@ pub fn fit_modulus(
         iterations: core.iterations,
         modulus_linear_interpolation_kpa: x_linear.exp(),
         interpolation_half_width_ln: half_interp,
+        discretisation_bias_ln: None,
         load_channel_used: load_used,
         rms_residual_load_n: core.rms_load,
     })

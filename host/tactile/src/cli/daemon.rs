@@ -40,7 +40,7 @@ pub struct DaemonArgs {
     token_file: Option<PathBuf>,
     /// Lookup table for the fit (default: the shipped production table,
     /// fem-core/data/default.lut, with --sim too: the simulated sample is made of the finer
-    /// fem-core/data/sim-bench.lut).
+    /// fem-core/data/default-fine.lut).
     #[arg(long)]
     lut: Option<PathBuf>,
     /// Stream rate while idle (Hz); experiments use their own.

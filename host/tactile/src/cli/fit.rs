@@ -3,7 +3,7 @@
 //! Exit codes: 0 success, 1 the fit failed, 2 bad input (file, CSV, table).
 
 use clap::Args;
-use fit::{FitOptions, LutModel, fit_modulus, points_from_curve_csv, recommend_pressure};
+use fit::{FitOptions, LutModel, points_from_curve_csv, recommend_pressure};
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
@@ -62,7 +62,7 @@ pub fn run(args: FitArgs) -> ExitCode {
         }
     };
     let start = Instant::now();
-    let fit = match fit_modulus(
+    let fit = match fit::discretisation::fit_modulus_with_model_error(
         &model,
         &points,
         FitOptions {

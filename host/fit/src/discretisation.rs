@@ -1,0 +1,107 @@
+//! The model's own discretisation error, carried into the modulus.
+//!
+//! The production table (mesh level L) and the same grid solved one level finer (level L+1,
+//! `fem-core/data/default-fine.lut`) differ in the contact radius by the leading part of
+//! level L's discretisation error (the difference of successive refinements). Projected on
+//! the fit's sensitivity to ln E2 at the estimate E, that difference is the bias it causes
+//! in the modulus, ln E(production model) - ln E(finer model), to first order:
+//!
+//! `d = sum_i s_i (a_fine(E, p_i, u_i) - a(E, p_i, u_i)) / sum_i s_i^2`,
+//! `s_i = da/d ln E2 at (E, p_i, u_i)` (central difference, step 0.01 in ln E2).
+//!
+//! (A sample whose true radii are the finer model's is fitted at E with the production
+//! model, so a(E) ~ a_fine(E_true) and a_fine(E) - a(E) ~ s (ln E - ln E_true).)
+//!
+//! The fit keeps its estimate (the finer level is not converged either,
+//! docs/fem-verification.md) and widens its interval by `|d|` in quadrature.
+
+use fem_core::lut::Lut;
+
+use crate::{FitError, FitOptions, FitPoint, LutModel, ModulusFit, fit_modulus};
+
+/// Step in ln E2 of the central difference for the sensitivity.
+const LN_STEP: f64 = 0.01;
+
+/// Whether `fine` is `coarse`'s grid solved on a finer mesh: the same axes and base
+/// parameters, a higher mesh level.
+pub fn is_finer_version_of(fine: &Lut, coarse: &Lut) -> bool {
+    let (f, c) = (&fine.grid, &coarse.grid);
+    let mut f_base = f.base.clone();
+    f_base.mesh_level = c.base.mesh_level;
+    f.base.mesh_level > c.base.mesh_level
+        && f.modulus_kpa == c.modulus_kpa
+        && f.pressure_kpa == c.pressure_kpa
+        && f_base == c.base
+}
+
+/// The estimated bias of the production model's estimate, ln E(production) - ln E(finer),
+/// at the points (see the module documentation); `None` if fewer than 3 points are covered
+/// by both tables.
+pub fn discretisation_bias_ln(
+    model: &LutModel,
+    fine: &LutModel,
+    modulus_kpa: f64,
+    points: &[FitPoint],
+) -> Option<f64> {
+    let (lo, hi) = (modulus_kpa * (-LN_STEP).exp(), modulus_kpa * LN_STEP.exp());
+    let (mut num, mut den, mut n) = (0.0, 0.0, 0usize);
+    for p in points {
+        let (Ok(a), Ok(a_fine), Ok(a_lo), Ok(a_hi)) = (
+            model.sample(modulus_kpa, p.p_air_kpa, p.u_s_mm),
+            fine.sample(modulus_kpa, p.p_air_kpa, p.u_s_mm),
+            model.sample(lo, p.p_air_kpa, p.u_s_mm),
+            model.sample(hi, p.p_air_kpa, p.u_s_mm),
+        ) else {
+            continue;
+        };
+        let s = (a_hi.a_mm - a_lo.a_mm) / (2.0 * LN_STEP);
+        num += s * (a_fine.a_mm - a.a_mm);
+        den += s * s;
+        n += 1;
+    }
+    (n >= 3 && den > 0.0).then(|| num / den)
+}
+
+/// Widens `fit`'s interval by the discretisation term in quadrature and records it.
+pub fn widen_for_discretisation(
+    fit: &mut ModulusFit,
+    model: &LutModel,
+    fine: &LutModel,
+    points: &[FitPoint],
+) {
+    let Some(bias) = discretisation_bias_ln(model, fine, fit.modulus_kpa, points) else {
+        return;
+    };
+    let (lo, hi) = (fit.ci95_kpa[0].ln(), fit.ci95_kpa[1].ln());
+    let centre = 0.5 * (lo + hi);
+    let half = (0.25 * (hi - lo).powi(2) + bias * bias).sqrt();
+    fit.ci95_kpa = [(centre - half).exp(), (centre + half).exp()];
+    fit.discretisation_bias_ln = Some(bias);
+    fit.ci_description.push_str(&format!(
+        "; plus in quadrature the model's discretisation term |ln E - ln E(finer mesh)| = {:.4}",
+        bias.abs()
+    ));
+}
+
+/// The shipped finer table (`fem_core::shipped::fine_lut_path`) if it is `lut`'s grid on a
+/// finer mesh; `None` for any other table (a user's own grid has no such estimate).
+pub fn shipped_finer_table(lut: &Lut) -> Option<Lut> {
+    let fine = fem_core::lut::read_lut(&fem_core::shipped::fine_lut_path()).ok()?;
+    is_finer_version_of(&fine.lut, lut).then_some(fine.lut)
+}
+
+/// [`fit_modulus`], then the interval widened by the model's discretisation term when the
+/// shipped finer table matches the model's table.
+pub fn fit_modulus_with_model_error(
+    model: &LutModel,
+    points: &[FitPoint],
+    options: FitOptions,
+) -> Result<ModulusFit, FitError> {
+    let mut fit = fit_modulus(model, points, options)?;
+    if let Some(fine) = shipped_finer_table(model.lut())
+        && let Ok(fine_model) = LutModel::new(&fine)
+    {
+        widen_for_discretisation(&mut fit, model, &fine_model, points);
+    }
+    Ok(fit)
+}
