@@ -89,12 +89,11 @@ fn demo_recovers_the_modulus_within_2_percent() {
     assert!(failures.is_empty(), "{failures:?}");
 }
 
-/// The goal the fit does not meet yet: its 95 % interval covers the truth. It covers only
-/// the noise and the table's interpolation, not the production mesh's discretisation error,
-/// and misses at 200 kPa (+0.75 %, interval 200.03 .. 202.97). Fails until the interval
-/// includes that error.
+/// The 95 % interval covers the truth. Noise and the table's interpolation alone do not
+/// cover it (at 200 kPa: +0.75 %, interval 200.03 .. 202.97 without the term): the
+/// interval needs the model's discretisation term (`fit::discretisation`).
 #[test]
-#[ignore = "real-time hil-sim runs (~20 s each); release; fails today (see its comment)"]
+#[ignore = "real-time hil-sim runs (~20 s each); release"]
 fn the_interval_covers_the_truth() {
     let failures: Vec<String> = demo_cases()
         .into_iter()
