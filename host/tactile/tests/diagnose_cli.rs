@@ -199,3 +199,120 @@ fn without_replicates_the_noise_model_is_assumed_and_said_so() {
     // one replicate cannot estimate the load noise either: ranked on the radius alone
     assert!(d["load_channel"].is_null());
 }
+
+/// A record folder as `tactile measure` writes it: `curve.csv` with the manometer's reading
+/// on every row (scattered around the set point) and `meta.json` with the plan.
+fn write_record(dir: &Path, curve: &fit::curve_csv::CurveCsv, pressure_kpa: f64, seed: u64) {
+    use experiment::IndentationPlan;
+    use experiment::calibration::CalibrationRecord;
+    use experiment::pipeline::LutInfo;
+    use experiment::record_meta::{
+        DeviceMeta, RECORD_SCHEMA_VERSION, RecordMeta, RecordStatus, SoftwareInfo,
+    };
+    std::fs::create_dir_all(dir).expect("record dir");
+    let mut state = seed;
+    let mut rows = curve.rows.clone();
+    for row in &mut rows {
+        // +-0.05 kPa of manometer scatter, deterministic
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        row.p_air_kpa =
+            Some(pressure_kpa + 0.1 * ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5));
+    }
+    let measured = fit::curve_csv::CurveCsv {
+        metadata: Vec::new(),
+        rows,
+    };
+    fit::curve_csv::write_curve_csv(&dir.join("curve.csv"), &measured).expect("curve.csv");
+    let meta = RecordMeta {
+        schema_version: RECORD_SCHEMA_VERSION,
+        software: SoftwareInfo {
+            name: "tactile measure".into(),
+            version: "0.1.0".into(),
+        },
+        protocol_version: 1,
+        device: DeviceMeta {
+            serial: "E6614C311B4A2C2D".into(),
+            firmware_version: "0.1.0".into(),
+            port: "/dev/ttyACM0".into(),
+        },
+        lut: LutInfo {
+            path: "default.lut".into(),
+            sha256: String::new(),
+        },
+        calibration: CalibrationRecord::new("E6614C311B4A2C2D", "0.1.0"),
+        calibration_path: None,
+        plan: IndentationPlan {
+            pressure_kpa,
+            start_mm: 0.8,
+            depth_mm: 1.7,
+            speed_mm_per_s: 2.0,
+            repeats: 5,
+            stream_rate_hz: 2000,
+        },
+        scenario: None,
+        job: None,
+        status: RecordStatus::Complete,
+        started_unix_s: 0,
+        finished_unix_s: None,
+        link: None,
+        frames: None,
+        notes: Vec::new(),
+    };
+    std::fs::write(
+        dir.join("meta.json"),
+        serde_json::to_string(&meta).expect("meta"),
+    )
+    .expect("meta.json");
+}
+
+#[test]
+fn record_folders_at_two_pressures_are_diagnosed_like_their_curves() {
+    let dir = scratch("records");
+    let file = dir.join("scale.csv");
+    write_curves(&file, Some((EffectKind::RadiusScale, 0.03)), |_| 0.0, 5, 3);
+    let all = fit::curve_csv::read_curve_csv(&file).expect("curves");
+    for p in [6.0, 15.0] {
+        let rows: Vec<_> = all
+            .rows
+            .iter()
+            .filter(|r| r.p_air_kpa == Some(p))
+            .cloned()
+            .collect();
+        assert!(!rows.is_empty());
+        let curve = fit::curve_csv::CurveCsv {
+            metadata: Vec::new(),
+            rows,
+        };
+        write_record(&dir.join(format!("record-{p}")), &curve, p, p as u64);
+    }
+    let out = tactile()
+        .args(["diagnose", "--json", "--bootstrap", "100", "--reruns", "3"])
+        .arg(dir.join("record-6"))
+        .arg(dir.join("record-15"))
+        .output()
+        .expect("run tactile");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let d: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+    // the records' nominal pressures, not the scattered manometer readings, group the data
+    assert_eq!(d["verdict"], "effect", "{d:#}");
+    assert_eq!(d["effect"], "radius_scale");
+
+    // a record still running has no curve to diagnose: named, exit 2
+    let running = dir.join("record-6").join("meta.json");
+    let text = std::fs::read_to_string(&running).expect("meta");
+    std::fs::write(&running, text.replace("\"complete\"", "\"running\"")).expect("meta");
+    let out = tactile()
+        .arg("diagnose")
+        .arg(dir.join("record-6"))
+        .output()
+        .expect("run tactile");
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("record-6") && err.contains("running"), "{err}");
+}

@@ -19,8 +19,10 @@ use std::time::Instant;
 
 #[derive(Debug, Args)]
 pub struct DiagnoseArgs {
-    /// Measured curves (CSV: u_s_mm,a_mm[,load_n,p_air_kpa,t_s,h_mm,phase,test]); one or
-    /// more pressures, replicates marked by the `test` column (or one file per replicate).
+    /// Measured curves (CSV: u_s_mm,a_mm[,load_n,p_air_kpa,t_s,h_mm,phase,test]) or record
+    /// folders of `tactile measure`, `tactile demo` or the daemon; one or more pressures,
+    /// replicates marked by the `test` column (a record's indentation cycles) or one file per
+    /// replicate.
     pub curves: Vec<PathBuf>,
     /// Print one JSON object.
     #[arg(long)]
@@ -97,7 +99,12 @@ pub fn run(args: DiagnoseArgs) -> ExitCode {
     }
     let mut curves = Vec::new();
     for path in &args.curves {
-        match fit::curve_csv::read_curve_csv(path) {
+        let curve = if path.is_dir() {
+            record_curve(path)
+        } else {
+            fit::curve_csv::read_curve_csv(path).map_err(|e| e.to_string())
+        };
+        match curve {
             Ok(c) => curves.push((path.display().to_string(), c)),
             Err(e) => return bad_input(e),
         }
@@ -329,4 +336,28 @@ fn build_tables(dir: &Path, only: &[String]) -> ExitCode {
         }
     }
     ExitCode::SUCCESS
+}
+
+/// The curve of a record folder: its `curve.csv`, at the record's nominal pressure (the
+/// plan's set point from `meta.json`; the per-row manometer readings scatter around it).
+fn record_curve(dir: &Path) -> Result<fit::curve_csv::CurveCsv, String> {
+    use experiment::record_meta::{RecordMeta, RecordStatus};
+    let meta = RecordMeta::read(dir).map_err(|e| e.to_string())?;
+    if matches!(meta.status, RecordStatus::Running | RecordStatus::Failed(_)) {
+        return Err(format!(
+            "{}: the record's status is \"{}\": only complete or partial records have a curve to diagnose",
+            dir.display(),
+            String::from(meta.status)
+        ));
+    }
+    let mut curve =
+        fit::curve_csv::read_curve_csv(&dir.join("curve.csv")).map_err(|e| e.to_string())?;
+    for row in &mut curve.rows {
+        row.p_air_kpa = None;
+    }
+    curve.metadata.retain(|(k, _)| k != "p_air_kpa");
+    curve
+        .metadata
+        .push(("p_air_kpa".into(), format!("{}", meta.plan.pressure_kpa)));
+    Ok(curve)
 }
