@@ -144,3 +144,128 @@ fn calibrate_then_measure_against_the_pty_bench() {
     assert_eq!(frames.measured, report.frames as u64);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Proximity calibrations at `pressures` on the rigid bench of `scenario`, with the camera
+/// scale and the manometer zero: what `tactile calibrate` stores.
+fn calibrate(scenario: &hil_sim::scenario::Scenario, pressures: &[f64]) -> CalibrationRecord {
+    let surface = scenario.stage.surface_mm;
+    let mut record: Option<CalibrationRecord> = None;
+    for &p in pressures {
+        let (bench, mut link) = start_and_connect(rigid_scenario(scenario, p)).unwrap();
+        let r = record.get_or_insert_with(|| {
+            let mut r = CalibrationRecord::new(link.info().serial.as_str(), "sim");
+            r.manometer_zero_kpa =
+                manometer_zero_kpa(&mut link, Duration::from_millis(500)).unwrap();
+            r
+        });
+        let plan = SweepPlan {
+            pressure_kpa: p,
+            start_mm: surface - 0.3,
+            end_mm: surface + 1.6,
+            speed_mm_per_s: 1.0,
+            contact_load_n: 0.005,
+        };
+        let data = proximity_sweep(
+            &mut link,
+            &plan,
+            r.manometer_zero_kpa,
+            &indicatif::ProgressBar::hidden(),
+        )
+        .unwrap();
+        drop(link);
+        bench.stop();
+        let rigid =
+            RigidSampleCurve::solve(p, DEMO_RIGID_MESH_LEVEL, DEMO_STEPS, DEMO_MAX_DEPTH_MM)
+                .unwrap();
+        r.set_proximity(&fit_sweep(&data, plan.contact_load_n, Some(&rigid)).unwrap());
+    }
+    let mut record = record.unwrap();
+    let px = px_per_mm_from_reference_disc(scenario, &[1.2, 2.0, 2.8, 3.4]).unwrap();
+    record.px_per_mm = Some(px.px_per_mm);
+    record.px_per_mm_sigma = Some(px.px_per_mm_sigma);
+    record.px_offset_px = px.offset_px;
+    record
+}
+
+/// `--pressure auto` on a stiff sample: the probe at 6 kPa finds it stiff, the measurement
+/// moves to the calibrated pressure where the table predicts the smaller error (15 kPa:
+/// at 6 kPa a stiff sample barely changes the contact radius), and measures it there.
+#[test]
+#[ignore = "real-time hil-sim runs (~60 s); release"]
+fn auto_pressure_measures_a_stiff_sample_at_the_higher_pressure() {
+    let modulus = 600.0;
+    let mut scenario = demo_scenario(modulus, 6.0, 9);
+    if let hil_sim::scenario::MechanicsSource::Solve { pressures_kpa, .. } = &mut scenario.mechanics
+    {
+        *pressures_kpa = vec![6.0, 15.0];
+    }
+    let calibration = calibrate(&scenario, &[6.0, 15.0]);
+    let lut_file = fem_core::lut::read_lut(&demo_fit_lut_path()).unwrap();
+    let model = LutModel::new(&lut_file.lut).unwrap();
+    let clock = scenario.clock.clone();
+    let surface = scenario.stage.surface_mm;
+    let (bench, mut link) = start_and_connect(scenario).unwrap();
+    let dir = std::env::temp_dir().join(format!("tactile-auto-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let record = RecordDir::create(&dir).unwrap();
+    let probe = RecordDir::create(&dir.join("probe")).unwrap();
+    let plan = IndentationPlan {
+        pressure_kpa: 6.0,
+        start_mm: surface - 0.2,
+        depth_mm: 1.7,
+        speed_mm_per_s: 2.0,
+        repeats: 3,
+        stream_rate_hz: 2000,
+    };
+    let (report, choice) = experiment::pipeline::run_at_recommended_pressure(
+        &mut link,
+        &calibration,
+        &plan,
+        &probe,
+        &record,
+        &model,
+        &LutInfo {
+            path: demo_fit_lut_path().display().to_string(),
+            sha256: lut_file.sha256.clone(),
+        },
+        &RunContext {
+            settle: Duration::from_millis(700),
+            ..RunContext::default()
+        },
+        &indicatif::ProgressBar::hidden(),
+        &|e| RecordStatus::Failed(e.to_string()),
+        |link, px| {
+            let reference = reference_frame(link, &bench, Duration::from_millis(50))
+                .map_err(|e| e.to_string())?;
+            let s =
+                SimRadiusSource::new(&bench, &clock, reference, px).map_err(|e| e.to_string())?;
+            Ok(Box::new(s))
+        },
+    )
+    .unwrap();
+    drop(link);
+    eprintln!(
+        "{choice:?}\n{:.1} kPa {:?}",
+        report.modulus_kpa, report.ci95_kpa
+    );
+    assert_eq!(choice.chosen_kpa, 15.0, "{choice:?}");
+    assert_eq!(
+        RecordMeta::read(&dir).unwrap().plan.pressure_kpa,
+        15.0,
+        "the record says where it was measured"
+    );
+    assert_eq!(
+        RecordMeta::read(&dir.join("probe"))
+            .unwrap()
+            .plan
+            .pressure_kpa,
+        6.0
+    );
+    // The same 2 % the demo meets (its stiff row reads +1.5 %, docs/results.md).
+    assert!(
+        (report.modulus_kpa / modulus - 1.0).abs() < 0.02,
+        "{:.1} kPa",
+        report.modulus_kpa
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

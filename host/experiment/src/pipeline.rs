@@ -232,3 +232,125 @@ pub fn run_experiment<'a>(
         notes: meta.notes.clone(),
     })
 }
+
+/// Indentations of the probe run of [`run_at_recommended_pressure`].
+pub const PROBE_REPEATS: u32 = 1;
+
+/// What the automatic pressure choice decided.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct PressureChoice {
+    /// The probe's pressure and its modulus estimate.
+    pub probe_kpa: f64,
+    pub probe_modulus_kpa: f64,
+    /// The chosen pressure and the predicted relative standard error there.
+    pub chosen_kpa: f64,
+    pub predicted_relative_se: f64,
+    /// The pressures considered: the table's pressures with a proximity calibration.
+    pub candidates: Vec<fit::PressureSensitivity>,
+}
+
+/// `--pressure auto`: a short probe indentation ([`PROBE_REPEATS`]) at `plan.pressure_kpa`,
+/// recorded in `probe_record`, fitted; then the experiment at the pressure where the table
+/// predicts the smallest error of the modulus (`fit::recommend_pressure`, with the probe's
+/// residual noise and point density), among the pressures the calibration covers. Stiff
+/// samples change the contact radius little at low pressure and need a higher one.
+#[allow(clippy::too_many_arguments)]
+pub fn run_at_recommended_pressure<'a>(
+    link: &mut Link,
+    calibration: &CalibrationRecord,
+    plan: &IndentationPlan,
+    probe_record: &RecordDir,
+    record: &RecordDir,
+    model: &LutModel,
+    lut: &LutInfo,
+    context: &RunContext,
+    progress: &indicatif::ProgressBar,
+    failure_status: FailureStatus<'_>,
+    mut make_radius: impl FnMut(
+        &mut Link,
+        PxPerMmCalibration,
+    ) -> Result<Box<dyn RadiusSource + 'a>, String>,
+) -> Result<(ExperimentReport, PressureChoice), RunError> {
+    let probe_plan = IndentationPlan {
+        repeats: PROBE_REPEATS,
+        ..*plan
+    };
+    let probe = run_experiment(
+        link,
+        calibration,
+        &probe_plan,
+        probe_record,
+        model,
+        lut,
+        context,
+        progress,
+        failure_status,
+        &mut make_radius,
+    )?;
+    let u_span = probe
+        .fit_points
+        .iter()
+        .map(|p| p.u_s_mm)
+        .fold(0.0, f64::max)
+        - probe
+            .fit_points
+            .iter()
+            .map(|p| p.u_s_mm)
+            .fold(f64::INFINITY, f64::min);
+    // the main run has `repeats` times the probe's points
+    let density = (plan.repeats.max(1) as f64 / PROBE_REPEATS as f64) * probe.points as f64
+        / u_span.max(1e-3);
+    let (all, _) = fit::recommend_pressure(
+        model,
+        probe.modulus_kpa,
+        probe.rms_residual_mm.max(1e-4),
+        density,
+    );
+    let candidates: Vec<fit::PressureSensitivity> = all
+        .into_iter()
+        .filter(|s| calibration.proximity_at(s.p_air_kpa).is_some())
+        .collect();
+    let best = candidates
+        .iter()
+        .min_by(|a, b| a.predicted_relative_se.total_cmp(&b.predicted_relative_se))
+        .ok_or_else(|| RunError::NoProximity {
+            pressure_kpa: plan.pressure_kpa,
+            have: "no table pressure with a proximity calibration".into(),
+        })?;
+    let choice = PressureChoice {
+        probe_kpa: plan.pressure_kpa,
+        probe_modulus_kpa: probe.modulus_kpa,
+        chosen_kpa: best.p_air_kpa,
+        predicted_relative_se: best.predicted_relative_se,
+        candidates: candidates.clone(),
+    };
+    tracing::info!(
+        probe_modulus_kpa = probe.modulus_kpa,
+        chosen_kpa = choice.chosen_kpa,
+        "pressure chosen"
+    );
+    let main_plan = IndentationPlan {
+        pressure_kpa: choice.chosen_kpa,
+        ..*plan
+    };
+    let mut report = run_experiment(
+        link,
+        calibration,
+        &main_plan,
+        record,
+        model,
+        lut,
+        context,
+        progress,
+        failure_status,
+        &mut make_radius,
+    )?;
+    report.notes.push(format!(
+        "pressure chosen automatically: {} kPa (predicted relative error {:.2} %), from a probe at {} kPa reading {:.1} kPa",
+        choice.chosen_kpa,
+        100.0 * choice.predicted_relative_se,
+        choice.probe_kpa,
+        choice.probe_modulus_kpa
+    ));
+    Ok((report, choice))
+}

@@ -25,9 +25,10 @@ pub struct MeasureArgs {
     /// V4L2 camera device (e.g. /dev/video0).
     #[arg(long)]
     pub camera: PathBuf,
-    /// Internal pressure (kPa).
-    #[arg(long, default_value_t = 6.0)]
-    pub pressure: f64,
+    /// Internal pressure (kPa), or `auto`: a one-indentation probe at 6 kPa, then the
+    /// measurement at the calibrated table pressure where the modulus is measured best.
+    #[arg(long, default_value = "6", value_parser = parse_pressure)]
+    pub pressure: PressureArg,
     /// Stage position where each indentation starts, above the sample (mm).
     #[arg(long)]
     pub start: f64,
@@ -69,6 +70,28 @@ fn load_calibration(args: &MeasureArgs) -> Result<(PathBuf, CalibrationRecord), 
     match &args.calibration {
         Some(p) => Ok((p.clone(), load_record(p).map_err(|e| e.to_string())?)),
         None => load_latest(&args.calibration_dir).map_err(|e| e.to_string()),
+    }
+}
+
+/// `--pressure`: a set point or the automatic choice.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum PressureArg {
+    Kpa(f64),
+    Auto,
+}
+
+/// The probe pressure of `--pressure auto` (the paper's working pressure).
+const AUTO_PROBE_KPA: f64 = 6.0;
+
+fn parse_pressure(text: &str) -> Result<PressureArg, String> {
+    if text.eq_ignore_ascii_case("auto") {
+        return Ok(PressureArg::Auto);
+    }
+    match text.parse::<f64>() {
+        Ok(v) if v.is_finite() && v >= 0.0 => Ok(PressureArg::Kpa(v)),
+        _ => Err(format!(
+            "`{text}` is neither a pressure in kPa (>= 0) nor `auto`"
+        )),
     }
 }
 
@@ -120,7 +143,10 @@ pub fn run(args: MeasureArgs) -> ExitCode {
     };
     tracing::info!(calibration = %cal_path.display(), lut = %lut_path.display(), "measuring");
     let plan = IndentationPlan {
-        pressure_kpa: args.pressure,
+        pressure_kpa: match args.pressure {
+            PressureArg::Kpa(p) => p,
+            PressureArg::Auto => AUTO_PROBE_KPA,
+        },
         start_mm: args.start,
         depth_mm: args.depth,
         speed_mm_per_s: args.speed,
@@ -144,28 +170,49 @@ pub fn run(args: MeasureArgs) -> ExitCode {
         job: None,
         settle: Duration::from_millis(1000),
     };
-    let result = run_experiment(
-        &mut link,
-        &calibration,
-        &plan,
-        &record,
-        &model,
-        &lut,
-        &context,
-        &progress,
-        &|e| RecordStatus::Failed(e.to_string()),
-        |_link, px| {
-            let mut source = V4l2Source::open(&V4l2Config {
-                device: Some(camera),
-                preferred: PixelFormat::Gray8,
-                ..V4l2Config::default()
-            })
-            .map_err(|e| e.to_string())?;
-            let reference = capture_reference(&mut source, 10).map_err(|e| e.to_string())?;
-            let s = CameraRadiusSource::start(source, reference, px).map_err(|e| e.to_string())?;
-            Ok(Box::new(s))
+    let make_radius = |_link: &mut Link, px| {
+        let mut source = V4l2Source::open(&V4l2Config {
+            device: Some(camera.clone()),
+            preferred: PixelFormat::Gray8,
+            ..V4l2Config::default()
+        })
+        .map_err(|e| e.to_string())?;
+        let reference = capture_reference(&mut source, 10).map_err(|e| e.to_string())?;
+        let s = CameraRadiusSource::start(source, reference, px).map_err(|e| e.to_string())?;
+        Ok(Box::new(s) as Box<dyn experiment::RadiusSource>)
+    };
+    let failed = |e: &experiment::ExperimentError| RecordStatus::Failed(e.to_string());
+    let result = match args.pressure {
+        PressureArg::Kpa(_) => run_experiment(
+            &mut link,
+            &calibration,
+            &plan,
+            &record,
+            &model,
+            &lut,
+            &context,
+            &progress,
+            &failed,
+            make_radius,
+        ),
+        PressureArg::Auto => match RecordDir::create(&out.join("probe")) {
+            Ok(probe) => experiment::pipeline::run_at_recommended_pressure(
+                &mut link,
+                &calibration,
+                &plan,
+                &probe,
+                &record,
+                &model,
+                &lut,
+                &context,
+                &progress,
+                &failed,
+                make_radius,
+            )
+            .map(|(report, _)| report),
+            Err(e) => Err(e.into()),
         },
-    );
+    };
     progress.finish_and_clear();
     match result {
         Ok(report) => {
