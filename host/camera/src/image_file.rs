@@ -7,6 +7,40 @@ use std::io::Cursor;
 use std::path::Path;
 use vision::GrayImage;
 
+/// Why bytes are not a grey image; each names the field or the part of the file.
+#[derive(Debug, thiserror::Error)]
+pub enum ImageDecodeError {
+    #[error("not a PGM (P5/P2) or PNG file")]
+    UnknownFormat,
+    #[error("PGM header: {field} missing or not a number at byte {at}")]
+    PgmFieldMissing { field: String, at: usize },
+    #[error("PGM header: {field} '{text}' out of range")]
+    PgmFieldRange { field: String, text: String },
+    #[error("PGM header: size {width}x{height} is empty")]
+    Empty { width: usize, height: usize },
+    #[error(
+        "{format} header: size {width}x{height} is larger than {MAX_IMAGE_SIDE_PX}x{MAX_IMAGE_SIDE_PX}"
+    )]
+    TooLarge {
+        format: &'static str,
+        width: usize,
+        height: usize,
+    },
+    #[error("PGM header: maxval {0} not in 1..=65535")]
+    MaxVal(u32),
+    #[error("PGM raster: {width}x{height} needs {need} bytes, file has {have}")]
+    PgmRaster {
+        width: usize,
+        height: usize,
+        need: usize,
+        have: usize,
+    },
+    #[error("PNG {part}: {message}")]
+    Png { part: &'static str, message: String },
+    #[error(transparent)]
+    Size(#[from] vision::GraySizeError),
+}
+
 /// Largest image file read (a 16-bit PGM at the largest side is 128 MiB).
 pub const MAX_IMAGE_FILE_BYTES: u64 = 160 << 20;
 
@@ -21,20 +55,20 @@ pub fn read_gray_image(path: &Path) -> Result<GrayImage, CameraError> {
             path: path.to_path_buf(),
             source,
         })?;
-    decode_gray_image(&bytes).map_err(|message| CameraError::BadFile {
+    decode_gray_image(&bytes).map_err(|e| CameraError::BadFile {
         path: path.to_path_buf(),
-        message,
+        message: e.to_string(),
     })
 }
 
 /// Decodes PGM or PNG bytes to a grey image; the error message names the bad field.
-pub fn decode_gray_image(bytes: &[u8]) -> Result<GrayImage, String> {
+pub fn decode_gray_image(bytes: &[u8]) -> Result<GrayImage, ImageDecodeError> {
     if bytes.starts_with(b"\x89PNG\r\n\x1a\n") {
         decode_png(bytes)
     } else if bytes.starts_with(b"P5") || bytes.starts_with(b"P2") {
         decode_pgm(bytes)
     } else {
-        Err("not a PGM (P5/P2) or PNG file".to_string())
+        Err(ImageDecodeError::UnknownFormat)
     }
 }
 
@@ -78,7 +112,7 @@ struct PgmHeader<'a> {
 }
 
 impl PgmHeader<'_> {
-    fn field(&mut self, name: &str) -> Result<u32, String> {
+    fn field(&mut self, name: &str) -> Result<u32, ImageDecodeError> {
         loop {
             match self.bytes.get(self.pos) {
                 Some(b'#') => {
@@ -99,35 +133,45 @@ impl PgmHeader<'_> {
         }
         let text = std::str::from_utf8(&self.bytes[start..self.pos]).unwrap_or("");
         if text.is_empty() {
-            return Err(format!(
-                "PGM header: {name} missing or not a number at byte {start}"
-            ));
+            return Err(ImageDecodeError::PgmFieldMissing {
+                field: name.to_string(),
+                at: start,
+            });
         }
         text.parse::<u32>()
-            .map_err(|_| format!("PGM header: {name} '{text}' out of range"))
+            .map_err(|_| ImageDecodeError::PgmFieldRange {
+                field: name.to_string(),
+                text: text.to_string(),
+            })
     }
 }
 
-fn decode_pgm(bytes: &[u8]) -> Result<GrayImage, String> {
+fn decode_pgm(bytes: &[u8]) -> Result<GrayImage, ImageDecodeError> {
     let plain = bytes.starts_with(b"P2");
     let mut header = PgmHeader { bytes, pos: 2 };
     let width = header.field("width")? as usize;
     let height = header.field("height")? as usize;
     let maxval = header.field("maxval")?;
     if width == 0 || height == 0 {
-        return Err(format!("PGM header: size {width}x{height} is empty"));
+        return Err(ImageDecodeError::Empty { width, height });
     }
     if width > MAX_IMAGE_SIDE_PX || height > MAX_IMAGE_SIDE_PX {
-        return Err(format!(
-            "PGM header: size {width}x{height} is larger than {MAX_IMAGE_SIDE_PX}x{MAX_IMAGE_SIDE_PX}"
-        ));
+        return Err(ImageDecodeError::TooLarge {
+            format: "PGM",
+            width,
+            height,
+        });
     }
     if !(1..=65535).contains(&maxval) {
-        return Err(format!("PGM header: maxval {maxval} not in 1..=65535"));
+        return Err(ImageDecodeError::MaxVal(maxval));
     }
     let n = width
         .checked_mul(height)
-        .ok_or_else(|| format!("PGM header: size {width}x{height} too large"))?;
+        .ok_or(ImageDecodeError::TooLarge {
+            format: "PGM",
+            width,
+            height,
+        })?;
     let scale = |v: u32| -> u8 { ((v.min(maxval) * 255 + maxval / 2) / maxval) as u8 };
     let mut pixels = Vec::with_capacity(n);
     if plain {
@@ -140,12 +184,14 @@ fn decode_pgm(bytes: &[u8]) -> Result<GrayImage, String> {
         let start = header.pos + 1;
         let bpp = if maxval < 256 { 1 } else { 2 };
         let need = n * bpp;
-        let raster = bytes.get(start..start + need).ok_or_else(|| {
-            format!(
-                "PGM raster: {width}x{height} needs {need} bytes, file has {}",
-                bytes.len().saturating_sub(start)
-            )
-        })?;
+        let raster = bytes
+            .get(start..start + need)
+            .ok_or_else(|| ImageDecodeError::PgmRaster {
+                width,
+                height,
+                need,
+                have: bytes.len().saturating_sub(start),
+            })?;
         if bpp == 1 {
             if maxval == 255 {
                 pixels.extend_from_slice(raster);
@@ -160,28 +206,38 @@ fn decode_pgm(bytes: &[u8]) -> Result<GrayImage, String> {
             );
         }
     }
-    GrayImage::new(width, height, pixels).map_err(|e| e.to_string())
+    Ok(GrayImage::new(width, height, pixels)?)
 }
 
-fn decode_png(bytes: &[u8]) -> Result<GrayImage, String> {
+fn decode_png(bytes: &[u8]) -> Result<GrayImage, ImageDecodeError> {
     let mut decoder = png::Decoder::new(Cursor::new(bytes));
     decoder.set_transformations(png::Transformations::normalize_to_color8());
-    let mut reader = decoder
-        .read_info()
-        .map_err(|e| format!("PNG header: {e}"))?;
+    let mut reader = decoder.read_info().map_err(|e| ImageDecodeError::Png {
+        part: "header",
+        message: e.to_string(),
+    })?;
     let (width, height) = (reader.info().width, reader.info().height);
     if width as usize > MAX_IMAGE_SIDE_PX || height as usize > MAX_IMAGE_SIDE_PX {
-        return Err(format!(
-            "PNG header: size {width}x{height} is larger than {MAX_IMAGE_SIDE_PX}x{MAX_IMAGE_SIDE_PX}"
-        ));
+        return Err(ImageDecodeError::TooLarge {
+            format: "PNG",
+            width: width as usize,
+            height: height as usize,
+        });
     }
     let size = reader
         .output_buffer_size()
-        .ok_or_else(|| "PNG header: image too large".to_string())?;
+        .ok_or(ImageDecodeError::TooLarge {
+            format: "PNG",
+            width: width as usize,
+            height: height as usize,
+        })?;
     let mut buf = vec![0u8; size];
     let info = reader
         .next_frame(&mut buf)
-        .map_err(|e| format!("PNG data: {e}"))?;
+        .map_err(|e| ImageDecodeError::Png {
+            part: "data",
+            message: e.to_string(),
+        })?;
     let (w, h) = (info.width as usize, info.height as usize);
     let channels = match info.color_type {
         png::ColorType::Grayscale => 1,
@@ -189,7 +245,10 @@ fn decode_png(bytes: &[u8]) -> Result<GrayImage, String> {
         png::ColorType::Rgb => 3,
         png::ColorType::Rgba => 4,
         png::ColorType::Indexed => {
-            return Err("PNG: palette not expanded".to_string());
+            return Err(ImageDecodeError::Png {
+                part: "colour type",
+                message: "palette not expanded".into(),
+            });
         }
     };
     let mut pixels = Vec::with_capacity(w * h);
@@ -205,5 +264,5 @@ fn decode_png(bytes: &[u8]) -> Result<GrayImage, String> {
             pixels.push(y);
         }
     }
-    GrayImage::new(w, h, pixels).map_err(|e| e.to_string())
+    Ok(GrayImage::new(w, h, pixels)?)
 }
