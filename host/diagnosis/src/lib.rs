@@ -78,7 +78,9 @@ impl Default for DiagnoseOptions {
 #[derive(Debug, thiserror::Error)]
 pub enum DiagnoseError {
     #[error("model: {0}")]
-    Model(String),
+    Model(#[from] model::ModelError),
+    #[error("the baseline fit under the noise model (GLS) did not converge")]
+    BaselineFit,
     #[error("baseline fit (host): {0}")]
     Fit(#[from] fit::FitError),
     #[error("{0}")]
@@ -284,7 +286,8 @@ pub fn diagnose(
     notes.push("viscoelastic and adhesion are computed from the elastic curve family (hereditary secant modulus of a constant-speed ramp; JKR at the model's load), the same approximation the simulator uses".into());
 
     // 1. the host's fit
-    let lut_model = fit::LutModel::new(base).map_err(|e| DiagnoseError::Model(e.to_string()))?;
+    let lut_model = fit::LutModel::new(base)
+        .map_err(|e| DiagnoseError::Model(model::ModelError::Baseline(e)))?;
     let host_fit = fit::fit_modulus(
         &lut_model,
         &data::to_fit_points(&points),
@@ -335,7 +338,7 @@ pub fn diagnose(
     let prelim = run_selection(
         &model, &cands, &points, &subset, &whitener, e_host, None, 0, None,
     )
-    .ok_or_else(|| DiagnoseError::Model("the baseline GLS fit failed".into()))?;
+    .ok_or(DiagnoseError::BaselineFit)?;
     // the load channel, when every used point has a load (a prediction check of each refit)
     let load = LoadChannel::new(&model, &points, &subset, prelim.base.modulus_kpa);
     if load.is_none() {

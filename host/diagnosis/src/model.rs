@@ -50,9 +50,12 @@ pub struct Surface<'a> {
 }
 
 impl<'a> Surface<'a> {
-    pub fn new(lut: &'a Lut, sel: &fem_core::lut::EffectSelection) -> Result<Self, String> {
+    pub fn new(
+        lut: &'a Lut,
+        sel: &fem_core::lut::EffectSelection,
+    ) -> Result<Self, fem_core::lut::LutError> {
         Ok(Self {
-            slice: lut.slice(sel).map_err(|e| e.to_string())?,
+            slice: lut.slice(sel)?,
             pressures: lut.grid.pressure_kpa.clone(),
             moduli: lut.grid.modulus_kpa.clone(),
         })
@@ -147,6 +150,19 @@ impl AxisSurfaces<'_> {
     }
 }
 
+/// A table the model cannot be built from.
+#[derive(Debug, thiserror::Error)]
+pub enum ModelError {
+    #[error("baseline table: {0}")]
+    Baseline(#[source] fem_core::lut::LutError),
+    #[error("{table}: {source}")]
+    Effect {
+        table: String,
+        #[source]
+        source: fem_core::lut::LutError,
+    },
+}
+
 /// Baseline and effect surfaces.
 #[derive(Debug, Clone)]
 pub struct Model<'a> {
@@ -156,10 +172,10 @@ pub struct Model<'a> {
 }
 
 impl<'a> Model<'a> {
-    pub fn new(base: &'a Lut, effects: &'a [EffectTable]) -> Result<Self, String> {
+    pub fn new(base: &'a Lut, effects: &'a [EffectTable]) -> Result<Self, ModelError> {
         let base_lut = base;
         let base = Surface::new(base, &fem_core::lut::EffectSelection::default())
-            .map_err(|e| format!("baseline table: {e}"))?;
+            .map_err(ModelError::Baseline)?;
         let mut axes = Vec::new();
         for t in effects {
             let values = t.axis.values_in(&t.lut.grid).to_vec();
@@ -167,7 +183,10 @@ impl<'a> Model<'a> {
                 .iter()
                 .map(|&v| Surface::new(&t.lut, &t.axis.select(v)))
                 .collect::<Result<Vec<_>, _>>()
-                .map_err(|e| format!("{}: {e}", t.path))?;
+                .map_err(|source| ModelError::Effect {
+                    table: t.path.clone(),
+                    source,
+                })?;
             axes.push(AxisSurfaces {
                 axis: t.axis,
                 values,

@@ -196,6 +196,12 @@ pub enum TableError {
     NoAxis { path: String },
     #[error("effect table {path}: {reason}")]
     Slice { path: String, reason: String },
+    #[error("the table's grid: {0}")]
+    Grid(#[from] fem_core::lut::LutError),
+    #[error("curve {index} is missing (a shard?)")]
+    MissingCurve { index: usize },
+    #[error("the cut-out table is not valid: {reason}")]
+    Invalid { reason: String },
 }
 
 /// One loaded effect table.
@@ -237,19 +243,18 @@ pub fn shipped_tables() -> Result<(Lut, Vec<EffectTable>), TableError> {
         path: shipped_tables_dir().display().to_string(),
         reason: "no effect tables".into(),
     })?;
-    let base = sub_table(&t.lut, &t.axis.select(t.axis.base_value())).map_err(|reason| {
-        TableError::Slice {
+    let base =
+        sub_table(&t.lut, &t.axis.select(t.axis.base_value())).map_err(|e| TableError::Slice {
             path: t.path.clone(),
-            reason,
-        }
-    })?;
+            reason: e.to_string(),
+        })?;
     Ok((base, effects))
 }
 
 /// A complete one-slice table cut out of `lut` at the effect selection `sel` (every other
 /// axis single-valued), with curves re-indexed; usable by the host's fit.
-pub fn sub_table(lut: &Lut, sel: &EffectSelection) -> Result<Lut, String> {
-    let (t, f, m, s) = lut.grid.resolve_effects(sel).map_err(|e| e.to_string())?;
+pub fn sub_table(lut: &Lut, sel: &EffectSelection) -> Result<Lut, TableError> {
+    let (t, f, m, s) = lut.grid.resolve_effects(sel)?;
     let mut grid = lut.grid.clone();
     grid.effects.sample_thickness_mm = vec![lut.grid.effects.sample_thickness_mm[t]];
     grid.effects.friction = vec![lut.grid.effects.friction[f]];
@@ -280,7 +285,7 @@ pub fn sub_table(lut: &Lut, sel: &EffectSelection) -> Result<Lut, String> {
             });
             let c = lut
                 .curve(old)
-                .ok_or_else(|| format!("curve {old} is missing (a shard?)"))?;
+                .ok_or(TableError::MissingCurve { index: old })?;
             curves.push(LutCurve {
                 index: new,
                 ..c.clone()
@@ -295,7 +300,8 @@ pub fn sub_table(lut: &Lut, sel: &EffectSelection) -> Result<Lut, String> {
         shard: None,
         curves,
     };
-    out.validate()?;
+    out.validate()
+        .map_err(|reason| TableError::Invalid { reason })?;
     Ok(out)
 }
 
