@@ -82,7 +82,8 @@ impl DeviceThread {
         lut: Arc<Lut>,
         lut_info: experiment::pipeline::LutInfo,
     ) -> Result<Self, String> {
-        let fit = FitWorker::start(Arc::clone(&lut), shared.events.clone())?;
+        let fit = FitWorker::start(Arc::clone(&lut), shared.events.clone())
+            .map_err(|e| format!("the fit worker thread: {e}"))?;
         let camera = match (&source, &config.camera) {
             #[cfg(feature = "sim")]
             (DeviceSource::Sim { .. }, _) => "simulated (hil-sim frame channel)".to_string(),

@@ -29,30 +29,17 @@ pub struct FitWorker {
 
 impl FitWorker {
     /// Starts the worker on `lut`.
-    pub fn start(lut: Arc<Lut>, events: broadcast::Sender<Event>) -> Result<Self, String> {
+    pub fn start(lut: Arc<Lut>, events: broadcast::Sender<Event>) -> std::io::Result<Self> {
         let (tx, rx) = channel::<FitRequest>();
         std::thread::Builder::new()
             .name("daemon-fit".into())
-            .spawn(move || run(&lut, rx, events))
-            .map_err(|e| e.to_string())?;
+            .spawn(move || run(&lut, rx, events))?;
         Ok(Self { tx })
     }
 
     /// Queues a fit (the newest running fit supersedes older queued ones).
     pub fn submit(&self, request: FitRequest) {
         let _ = self.tx.send(request);
-    }
-
-    /// Fits and waits for the result.
-    pub fn fit_now(&self, points: Vec<FitPoint>) -> Result<ModulusFit, String> {
-        let (reply, rx) = channel();
-        self.submit(FitRequest {
-            points,
-            final_fit: true,
-            reply: Some(reply),
-        });
-        rx.recv()
-            .map_err(|_| "the fit worker stopped".to_string())?
     }
 }
 
