@@ -106,6 +106,10 @@ class Emulator {
     this.logger = logger;
     this.watchdog = watchdog;
     watchdog.onWatchdogTrigger = () => {
+      // The chip resets now: stop the expired timer (rp2040js's periodic alarm would fire
+      // again at the same instant) and let the run loop build the rebooted chip.
+      watchdog.timer.enable = false;
+      watchdog.alarm.enable = false;
       this.pendingReset = { reason: watchdog.reason, scratch: watchdog.scratchData.slice() };
     };
     this.board = new Board(rp, watchdog, this.inputs, this.rng);
@@ -146,9 +150,8 @@ class Emulator {
       const clock = rp.clock;
       const target = untilNs - this.baseNs;
       while (clock.nanos < target && !this.pendingReset) {
-        if (this.hung) {
-          clock.tick(target - clock.nanos);
-        } else if (core.waiting) {
+        if (this.hung || core.waiting) {
+          // Nothing executes until the next alarm (an interrupt, or the watchdog).
           const next = clock.nextAlarm ? clock.nextAlarm.nanos : target;
           clock.tick(Math.max(0, Math.min(next, target) - clock.nanos));
         } else {
