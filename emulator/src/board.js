@@ -53,7 +53,7 @@ class DutyMeter {
     this.risingEdges = 0;
     this.lastRise = null;
     this.minPeriodNs = Infinity;
-    this.maxPeriodNs = 0;
+    this.periods = []; // rise-to-rise intervals below 1 ms (longer ones span a 0 % duty)
   }
   change(high, now) {
     if (high === this.high) return;
@@ -63,13 +63,29 @@ class DutyMeter {
       if (this.lastRise !== null) {
         const period = now - this.lastRise;
         this.minPeriodNs = Math.min(this.minPeriodNs, period);
-        this.maxPeriodNs = Math.max(this.maxPeriodNs, period);
+        if (period < 1e6 && this.periods.length < 1e6) this.periods.push(period);
       }
       this.lastRise = now;
     }
     this.high = high;
     this.since = now;
   }
+  /**
+   * Rise-to-rise intervals that are not a whole number of PWM periods (the shortest
+   * interval seen), within one 8 ns clock: a counter that was disturbed. Intervals that
+   * span cycles at 0 % duty are whole numbers of periods.
+   */
+  offGridPeriods() {
+    const p = this.minPeriodNs;
+    if (!Number.isFinite(p)) return 0;
+    let n = 0;
+    for (const period of this.periods) {
+      const rest = period - Math.round(period / p) * p;
+      if (Math.abs(rest) > 8) n++;
+    }
+    return n;
+  }
+
   take(windowStart, now) {
     if (this.high) this.highNs += now - this.since;
     this.since = now;

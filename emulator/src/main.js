@@ -29,6 +29,9 @@ import { UsbHost } from './usb-host.js';
 const FLASH_SIZE = 16 * 1024 * 1024;
 const NS_PER_CYCLE = 8; // 125 MHz clk_sys (embassy-rp's default clock setup)
 const WATCHDOG_REASON_TIMER = 1;
+// Watchdog SCRATCH4 value by which the boot ROM recognises a reboot to a vector it was
+// given (its reset_usb_boot uses it to reboot into the USB bootloader).
+const ROM_REBOOT_MAGIC = 0xb007c0d3;
 
 function parseArgs(argv) {
   const args = { elf: null, uniqueId: 'E6614C311B7A8F2D', seed: 1, verbose: false, bootrom: null };
@@ -127,12 +130,18 @@ class Emulator {
     this.pendingReset = null;
     this.collectTickStats();
     this.baseNs = this.nowNs;
-    this.resets.push({ t_ns: this.baseNs, reason: reason === WATCHDOG_REASON_TIMER ? 'timeout' : 'trigger' });
+    // The boot ROM runs after every reset. If the scratch registers carry its reboot magic
+    // (left by reset_usb_boot), the emulated ROM runs and follows them (into BOOTSEL);
+    // otherwise it would boot the flash, a path rp2040js cannot run (no XIP through the
+    // SSI), so the chip enters boot2 directly as at power-on.
+    const runBootrom = scratch[4] >>> 0 === ROM_REBOOT_MAGIC;
+    this.resets.push({
+      t_ns: this.baseNs,
+      reason: reason === WATCHDOG_REASON_TIMER ? 'timeout' : 'trigger',
+      rom_reboot: runBootrom,
+    });
     this.hung = false;
-    // A watchdog timeout reboots the flash image (the ROM's flash boot path, which rp2040js
-    // cannot run, is replaced by entering boot2 directly); a software trigger (the ROM's
-    // reset_usb_boot) runs the ROM, which reads its scratch registers and enters BOOTSEL.
-    this.boot({ resetReason: reason, scratch, runBootrom: reason !== WATCHDOG_REASON_TIMER });
+    this.boot({ resetReason: reason, scratch, runBootrom });
   }
 
   collectTickStats() {
@@ -212,7 +221,7 @@ class Emulator {
           pump_pwm: {
             rising_edges: pump.risingEdges,
             min_period_ns: Number.isFinite(pump.minPeriodNs) ? pump.minPeriodNs : null,
-            max_period_ns: pump.maxPeriodNs || null,
+            off_grid_periods: pump.offGridPeriods(),
           },
           steps_total: this.board.stepsTotal,
           steps_while_disabled: this.board.stepsWhileDisabled,

@@ -98,8 +98,11 @@ pub enum EmulatorError {
 pub struct ResetEvent {
     /// Emulated time since power-on (ns).
     pub t_ns: f64,
-    /// `timeout` (the watchdog expired) or `trigger` (software reset, e.g. into BOOTSEL).
+    /// `timeout` (the watchdog expired) or `trigger` (forced through its CTRL register).
     pub reason: String,
+    /// The boot ROM was asked to reboot to a vector (its USB bootloader after
+    /// `reset_usb_boot`) rather than to the flash image.
+    pub rom_reboot: bool,
 }
 
 /// The emulator's USB host's view of the device.
@@ -116,8 +119,11 @@ pub struct UsbReport {
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct PwmReport {
     pub rising_edges: u64,
+    /// The PWM period (the shortest rise-to-rise interval).
     pub min_period_ns: Option<f64>,
-    pub max_period_ns: Option<f64>,
+    /// Rise-to-rise intervals (below 1 ms) that are not a whole number of periods within
+    /// one 8 ns clock: the counter was disturbed (e.g. by rewriting the divider).
+    pub off_grid_periods: u64,
 }
 
 /// HX711 conversions made and read out.
