@@ -4,6 +4,7 @@
 // - SEV sets the event register (rp2040js only logs it, so a task woken from thread mode
 //   waited in WFE for the next interrupt);
 // - the flash's unique-ID command (0x4B) answered through the SSI;
+// - a VREG_AND_CHIP_RESET block (the boot ROM reads CHIP_RESET);
 // - a watchdog timeout or trigger requests a chip reset (handled by the caller).
 
 import { BasePeripheral, RP2040 } from 'rp2040js';
@@ -19,6 +20,12 @@ const SSI_SSIENR = 0x08;
 const SSI_DR0 = 0x60;
 const SSI_TMOD_EEPROM_READ = 3;
 const FLASH_CMD_READ_UNIQUE_ID = 0x4b;
+
+const VREG_AND_CHIP_RESET_KEY = (0x40064000 >>> 14) << 2;
+const VREG = 0x00;
+const BOD = 0x04;
+const CHIP_RESET = 0x08;
+const CHIP_RESET_HAD_POR = 1 << 8;
 
 const WATCHDOG_KEY = (0x40058000 >>> 14) << 2;
 const WATCHDOG_LOAD = 0x04;
@@ -36,6 +43,29 @@ class XipCtrl extends BasePeripheral {
   }
   writeUint32(offset, value) {
     if (offset === XIP_CTRL) this.ctrl = value & 0xb;
+  }
+}
+
+/**
+ * The voltage regulator and chip-reset block, which rp2040js leaves unimplemented (reads
+ * 0xffffffff). The boot ROM reads CHIP_RESET first: PSM_RESTART_FLAG set means "a debugger
+ * asked for a restart" and parks the core, so it must read as after power-on (HAD_POR).
+ */
+class VregAndChipReset extends BasePeripheral {
+  constructor(rp, name) {
+    super(rp, name);
+    this.vreg = 0xb1; // 1.10 V, enabled (reset value)
+    this.bod = 0x91;
+  }
+  readUint32(offset) {
+    if (offset === VREG) return this.vreg;
+    if (offset === BOD) return this.bod;
+    if (offset === CHIP_RESET) return CHIP_RESET_HAD_POR;
+    return 0;
+  }
+  writeUint32(offset, value) {
+    if (offset === VREG) this.vreg = value & 0xf3;
+    if (offset === BOD) this.bod = value & 0xf1;
   }
 }
 
@@ -76,6 +106,7 @@ export function createChip({ bootrom, image, uniqueId, resetReason, scratch, run
   rp.loadBootrom(bootrom);
   rp.flash.set(image);
   rp.peripherals[XIP_CTRL_KEY] = new XipCtrl(rp, 'XIP_CTRL');
+  rp.peripherals[VREG_AND_CHIP_RESET_KEY] = new VregAndChipReset(rp, 'VREG_AND_CHIP_RESET');
   patchSsiUniqueId(rp, uniqueId);
   const watchdog = rp.peripherals[WATCHDOG_KEY];
   watchdog.reason = resetReason;

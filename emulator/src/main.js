@@ -139,6 +139,7 @@ class Emulator {
       t_ns: this.baseNs,
       reason: reason === WATCHDOG_REASON_TIMER ? 'timeout' : 'trigger',
       rom_reboot: runBootrom,
+      scratch: Array.from(scratch, (v) => v >>> 0),
     });
     this.hung = false;
     this.boot({ resetReason: reason, scratch, runBootrom });

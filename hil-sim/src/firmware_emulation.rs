@@ -103,6 +103,8 @@ pub struct ResetEvent {
     /// The boot ROM was asked to reboot to a vector (its USB bootloader after
     /// `reset_usb_boot`) rather than to the flash image.
     pub rom_reboot: bool,
+    /// The watchdog's scratch registers at the reset (what the boot ROM reads).
+    pub scratch: Vec<u32>,
 }
 
 /// The emulator's USB host's view of the device.

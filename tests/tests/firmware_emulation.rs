@@ -14,7 +14,9 @@ use std::time::{Duration, Instant};
 
 use hil_sim::bench::{BenchHandle, BenchOptions, HostWrite, Pacing, start_firmware};
 use hil_sim::device::TruthSample;
-use hil_sim::firmware_emulation::{EmulatorConfig, EmulatorReport, FirmwareControl, FirmwareDevice};
+use hil_sim::firmware_emulation::{
+    EmulatorConfig, EmulatorReport, FirmwareControl, FirmwareDevice,
+};
 use hil_sim::scenario::{MechanicsSource, Scenario};
 use host::link::{Link, LinkConfig, LinkError, SerialTransport};
 use protocol::{ChannelSet, FaultFlags, PROTOCOL_VERSION, Reply, Request};
@@ -101,7 +103,8 @@ impl Bench {
             probe.start();
             writes.extend(w);
             truth.extend(more);
-            if let (Some(first), Some(last)) = (start.or(truth.first().map(|t| t.t_s)), truth.last())
+            if let (Some(first), Some(last)) =
+                (start.or(truth.first().map(|t| t.t_s)), truth.last())
                 && last.t_s - first >= sim_s
             {
                 return;
@@ -141,9 +144,15 @@ fn hello_reports_the_library_constants_and_the_flash_unique_id() {
     got.serial = expected.serial.clone();
     assert_eq!(got, expected);
     let report = bench.report();
-    assert_eq!((report.usb.vid, report.usb.pid), (Some(0x1209), Some(0x7AC7)));
+    assert_eq!(
+        (report.usb.vid, report.usb.pid),
+        (Some(0x1209), Some(0x7AC7))
+    );
     assert_eq!(report.usb.serial.as_deref(), Some("DE63502107A12C39"));
-    assert!(report.usb.dtr, "the host side raised DTR on the CDC interface");
+    assert!(
+        report.usb.dtr,
+        "the host side raised DTR on the CDC interface"
+    );
     assert!(report.resets.is_empty(), "no reset: {:?}", report.resets);
     eprintln!(
         "emulated {:.2} s, {} control ticks, longest {:.1} us (no flash wait states)",
@@ -160,7 +169,8 @@ fn hello_reports_the_library_constants_and_the_flash_unique_id() {
 fn streams_2_khz_without_loss_for_10_simulated_seconds() {
     let bench = bench();
     let mut link = bench.connect();
-    link.start_stream(2000, ChannelSet::ALL).expect("stream starts");
+    link.start_stream(2000, ChannelSet::ALL)
+        .expect("stream starts");
     let mut samples = Vec::new();
     let wall = Instant::now();
     let deadline = wall + Duration::from_secs(60);
@@ -172,7 +182,10 @@ fn streams_2_khz_without_loss_for_10_simulated_seconds() {
         {
             break;
         }
-        assert!(Instant::now() < deadline, "10 simulated seconds took over a minute");
+        assert!(
+            Instant::now() < deadline,
+            "10 simulated seconds took over a minute"
+        );
     }
     link.stop_stream().expect("stream stops");
     let stats = link.stats();
@@ -188,7 +201,11 @@ fn streams_2_khz_without_loss_for_10_simulated_seconds() {
     for pair in samples.windows(2) {
         let dt = pair[1].sample.device_time_us - pair[0].sample.device_time_us;
         spacing = (spacing.0.min(dt), spacing.1.max(dt));
-        assert!(dt > 0 && dt < 1000, "sample spacing {dt} us at {}", pair[0].sample.device_time_us);
+        assert!(
+            dt > 0 && dt < 1000,
+            "sample spacing {dt} us at {}",
+            pair[0].sample.device_time_us
+        );
     }
     eprintln!("sample spacing {}..{} us", spacing.0, spacing.1);
     let span_us = samples.last().map_or(0, |s| s.sample.device_time_us)
@@ -239,7 +256,10 @@ fn step_figures(truth: &[TruthSample], t_cmd: f64, setpoint: f64) -> StepFigures
     StepFigures {
         within_2_percent_s: settled(0.02),
         within_5_percent_s: settled(0.05),
-        peak_kpa: after.iter().map(|t| t.pressure_kpa).fold(f64::MIN, f64::max),
+        peak_kpa: after
+            .iter()
+            .map(|t| t.pressure_kpa)
+            .fold(f64::MIN, f64::max),
         final_kpa: tail.iter().sum::<f64>() / tail.len().max(1) as f64,
     }
 }
@@ -276,7 +296,11 @@ fn library_reference(steps: &[f32], window_s: f64) -> Vec<StepFigures> {
             let n = protocol::encode_frame(&beat, &mut buf).expect("a request fits a frame");
             device.host_write(&buf[..n], t);
         }
-        figures.push(step_figures(&device.take_truth(), t_cmd, f64::from(setpoint)));
+        figures.push(step_figures(
+            &device.take_truth(),
+            t_cmd,
+            f64::from(setpoint),
+        ));
     }
     figures
 }
@@ -299,7 +323,10 @@ fn pressure_steps_to_6_and_15_kpa_regulate_as_the_library_controller_does() {
         let (mut truth, mut writes) = (Vec::new(), Vec::new());
         bench.run_sim(&mut link, WINDOW_S, &mut truth, &mut writes);
         // The first write after the probe started is the SetPressure request.
-        let t_cmd = writes.first().map(|w| w.t_s).expect("the request was recorded");
+        let t_cmd = writes
+            .first()
+            .map(|w| w.t_s)
+            .expect("the request was recorded");
         let fw = step_figures(&truth, t_cmd, f64::from(setpoint));
         eprintln!("{setpoint} kPa: binary {fw:?}");
         eprintln!("{setpoint} kPa: library {lib:?}");
@@ -312,12 +339,29 @@ fn pressure_steps_to_6_and_15_kpa_regulate_as_the_library_controller_does() {
         // Same controller, same plant: the binary's step matches the library's. Tolerances:
         // the two runs draw different sensor and ADC noise (0.02 kPa rms per reading), and
         // the binary's request reaches the controller up to a USB frame later.
-        let t5 = fw.within_5_percent_s.expect("the binary settles within 5 %");
-        let t5_lib = lib.within_5_percent_s.expect("the library settles within 5 %");
-        assert!(t5 <= t5_lib + 0.05, "within 5 % after {t5:.3} s (library {t5_lib:.3} s)");
+        let t5 = fw
+            .within_5_percent_s
+            .expect("the binary settles within 5 %");
+        let t5_lib = lib
+            .within_5_percent_s
+            .expect("the library settles within 5 %");
+        assert!(
+            t5 <= t5_lib + 0.05,
+            "within 5 % after {t5:.3} s (library {t5_lib:.3} s)"
+        );
         assert!(t5 <= 0.5, "within 5 % only after {t5:.3} s");
-        assert!((fw.peak_kpa - lib.peak_kpa).abs() <= 0.01 * sp, "peak {} vs {}", fw.peak_kpa, lib.peak_kpa);
-        assert!((fw.final_kpa - lib.final_kpa).abs() <= 0.005 * sp, "holds {} vs {}", fw.final_kpa, lib.final_kpa);
+        assert!(
+            (fw.peak_kpa - lib.peak_kpa).abs() <= 0.01 * sp,
+            "peak {} vs {}",
+            fw.peak_kpa,
+            lib.peak_kpa
+        );
+        assert!(
+            (fw.final_kpa - lib.final_kpa).abs() <= 0.005 * sp,
+            "holds {} vs {}",
+            fw.final_kpa,
+            lib.final_kpa
+        );
     }
     let report = bench.report();
     // 25 kHz PWM from 125 MHz / 5000 (40 us, within one 8 ns clock), and the duty updates
@@ -370,11 +414,18 @@ fn a_silent_host_trips_heartbeat_lost_and_the_pump_stops() {
     assert_eq!(status.pump_duty_per_10k, 0);
     // On the plant: the pump ran before the silence and is off from about 1 s into it.
     let pumping = |t: &&TruthSample| t.outputs.pump_duty_per_10k > 0;
-    let last_pumping = truth.iter().filter(pumping).map(|t| t.t_s).fold(f64::MIN, f64::max);
+    let last_pumping = truth
+        .iter()
+        .filter(pumping)
+        .map(|t| t.t_s)
+        .fold(f64::MIN, f64::max);
     let off_after = last_pumping - silent_from;
     eprintln!("pump off {off_after:.3} s into the silence");
     // The last request before the silence was at most one heartbeat interval (0.2 s) earlier.
-    assert!((0.75..=1.1).contains(&off_after), "pump stopped {off_after:.3} s into the silence");
+    assert!(
+        (0.75..=1.1).contains(&off_after),
+        "pump stopped {off_after:.3} s into the silence"
+    );
 }
 
 #[test]
@@ -386,12 +437,18 @@ fn overpressure_trips_within_a_tick_pump_off_and_vent_open() {
     probe.start();
     // Full pump, vent closed: nothing limits the pressure but the safety supervisor.
     link.request(Request::Vent { open: false }).expect("vent");
-    link.request(Request::PumpManual { duty_per_10k: 10_000 })
-        .expect("PumpManual acked");
+    link.request(Request::PumpManual {
+        duty_per_10k: 10_000,
+    })
+    .expect("PumpManual acked");
     let (mut truth, mut writes) = (Vec::new(), Vec::new());
     bench.run_sim(&mut link, 0.8, &mut truth, &mut writes);
     let status = link.status().expect("status");
-    assert!(status.faults.contains(FaultFlags::OVERPRESSURE), "faults {:?}", status.faults);
+    assert!(
+        status.faults.contains(FaultFlags::OVERPRESSURE),
+        "faults {:?}",
+        status.faults
+    );
     assert_eq!(status.pump_duty_per_10k, 0);
     assert!(status.vent_open);
     // The first tick in which the vent opened after the pump had been running at full duty
@@ -412,15 +469,25 @@ fn overpressure_trips_within_a_tick_pump_off_and_vent_open() {
             .iter()
             .position(|t| t.outputs.pump_duty_per_10k == 0)
             .expect("the pump stopped");
-    assert!(off <= tripped + 1, "the pump ran on for {} ticks", off - tripped);
-    let peak = truth.iter().map(|t| t.pressure_kpa).fold(f64::MIN, f64::max);
+    assert!(
+        off <= tripped + 1,
+        "the pump ran on for {} ticks",
+        off - tripped
+    );
+    let peak = truth
+        .iter()
+        .map(|t| t.pressure_kpa)
+        .fold(f64::MIN, f64::max);
     eprintln!("tripped at {at_trip:.3} kPa (true), peak {peak:.3} kPa");
     // The firmware trips on its own reading: the true pressure at the trip lies within
     // 20 kPa +- 0.1 (manometer noise 0.02 kPa rms; near the limit the pressure rises by
     // ~0.035 kPa per 0.5 ms tick, and the reading reaches the firmware one tick late), and it
     // never climbs past the trip once the pump is off and the vent open.
     assert!((19.9..=20.1).contains(&at_trip), "tripped at {at_trip} kPa");
-    assert!(peak <= at_trip + 0.05, "peak {peak} kPa after tripping at {at_trip} kPa");
+    assert!(
+        peak <= at_trip + 0.05,
+        "peak {peak} kPa after tripping at {at_trip} kPa"
+    );
     // Vented: the plant's pressure falls towards zero after the trip.
     let last = truth.last().map_or(f64::MAX, |t| t.pressure_kpa);
     assert!(last < 5.0, "still {last} kPa after venting");
@@ -480,7 +547,12 @@ fn enter_bootloader_acks_and_reboots_into_the_boot_rom() {
         if r.usb.vid == Some(0x2E8A) {
             break r;
         }
-        assert!(Instant::now() < deadline, "no boot ROM device: {:?}", r.usb);
+        assert!(
+            Instant::now() < deadline,
+            "no boot ROM device: {:?} {:?}",
+            r.usb,
+            r.resets
+        );
         std::thread::sleep(Duration::from_millis(100));
     };
     assert_eq!(report.usb.pid, Some(0x0003));
@@ -507,7 +579,10 @@ fn a_hang_is_reset_by_the_watchdog_and_reported_as_watchdog_reset() {
             assert!(!r.resets[0].rom_reboot);
             break;
         }
-        assert!(Instant::now() < deadline, "the watchdog did not reset the chip");
+        assert!(
+            Instant::now() < deadline,
+            "the watchdog did not reset the chip"
+        );
         std::thread::sleep(Duration::from_millis(100));
     }
     drop(link);
@@ -520,4 +595,3 @@ fn a_hang_is_reset_by_the_watchdog_and_reported_as_watchdog_reset() {
         status.faults
     );
 }
-
