@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The whole test suite: formatting, lints, the no_std checks, every test of the workspace,
-# and the RP2040 firmware's release build with its size budget. This is what CI runs.
+# the RP2040 firmware's release build with its size budget, and that binary in the emulated
+# chip against hil-sim's plant (scripts/firmware-emulation-test.sh). This is what CI runs.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -31,6 +32,8 @@ if [ -f firmware/rp2040/Cargo.toml ]; then
         step "firmware/rp2040: size budget"
         scripts/check-firmware-size.sh
     fi
+    step "firmware/rp2040: the release binary in the emulated chip"
+    scripts/firmware-emulation-test.sh
 fi
 
 printf '\nAll checks passed in %ss.\n' "$(( $(date +%s) - start ))"
