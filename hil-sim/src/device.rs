@@ -161,6 +161,13 @@ pub enum SimError {
     Emulator(#[from] crate::firmware_emulation::EmulatorError),
 }
 
+/// Device time (µs) of the first controller tick for an MCU clock: the first tick boundary
+/// at or after the device time of the simulation's epoch.
+pub(crate) fn first_tick_device_us(clock: &crate::sensors::ClockConfig) -> u64 {
+    let period = u64::from(TICK_PERIOD_US);
+    (clock.offset_us.max(0.0) as u64).div_ceil(period) * period
+}
+
 /// Camera phase: the first frame's exposure centre after the epoch (free-running sensor).
 const CAMERA_PHASE_S: f64 = 0.003_7;
 
@@ -195,7 +202,7 @@ impl SimDevice {
         let contact = mechanics.contact(h0, p0, modulus);
         let pneumatics = Pneumatics::new(scenario.pneumatics.clone(), contact.shell_volume_mm3, p0);
         let period = u64::from(TICK_PERIOD_US);
-        let first_tick_us = (scenario.clock.offset_us.max(0.0) as u64).div_ceil(period) * period;
+        let first_tick_us = first_tick_device_us(&scenario.clock);
         let t0 = scenario.clock.host_s(first_tick_us as f64);
         let mut programme = scenario.programme.clone();
         programme.sort_by(|a, b| a.at_s.total_cmp(&b.at_s));

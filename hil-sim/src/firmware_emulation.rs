@@ -22,15 +22,20 @@
 use std::collections::VecDeque;
 use std::io::{BufRead, BufReader, Write};
 use std::path::PathBuf;
-use std::process::{Child, ChildStdin, ChildStdout, Command, Stdio};
+use std::process::{Child, ChildStdin, Command, Stdio};
+use std::sync::mpsc::{Receiver, RecvTimeoutError, channel};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use firmware::{Outputs, StageOutput};
+use firmware::{Outputs, StageOutput, TICK_PERIOD_US};
 use serde::{Deserialize, Serialize};
 
-use crate::device::{AnalogInputs, SimDevice, SimError, SimFrame, SimStats, TruthSample, TxChunk};
+use crate::device::{
+    AnalogInputs, SimDevice, SimError, SimFrame, SimStats, TruthSample, TxChunk,
+    first_tick_device_us,
+};
 use crate::scenario::Scenario;
+use crate::sensors::ClockConfig;
 
 /// Where the emulator is and what it runs.
 #[derive(Debug, Clone, PartialEq)]
@@ -87,6 +92,8 @@ pub enum EmulatorError {
     Io(#[from] std::io::Error),
     #[error("the emulator exited")]
     Exited,
+    #[error("the emulator did not answer within {0:?} (stopped)")]
+    Stalled(Duration),
     #[error("the emulator refused a request: {0}")]
     Refused(String),
     #[error("unreadable emulator reply `{line}`: {error}")]
@@ -181,13 +188,18 @@ struct ErrorReply {
     error: String,
 }
 
+/// Longest wall time one request may take: a step of 500 µs takes about a millisecond, a
+/// report a few; far beyond that the emulator is wedged and is stopped rather than
+/// blocking the bench (and whoever waits for it) for ever.
+const REPLY_TIMEOUT: Duration = Duration::from_secs(30);
+
 /// The Node process running the emulated chip.
 #[derive(Debug)]
 pub struct Emulator {
     child: Child,
     stdin: ChildStdin,
-    stdout: BufReader<ChildStdout>,
-    line: String,
+    /// Lines from the process's stdout, read on their own thread (so a reply can time out).
+    lines: Receiver<std::io::Result<String>>,
 }
 
 impl Emulator {
@@ -221,11 +233,30 @@ impl Emulator {
             let _ = child.kill();
             return Err(EmulatorError::Exited);
         };
+        let (tx, lines) = channel();
+        let reader = std::thread::Builder::new()
+            .name("emulator-stdout".into())
+            .spawn(move || {
+                let mut stdout = BufReader::new(stdout);
+                loop {
+                    let mut line = String::new();
+                    let read = stdout.read_line(&mut line);
+                    let done = !matches!(read, Ok(n) if n > 0);
+                    let item = read.map(|_| line);
+                    if tx.send(item).is_err() || done {
+                        return;
+                    }
+                }
+            });
+        if let Err(e) = reader {
+            let _ = child.kill();
+            let _ = child.wait();
+            return Err(e.into());
+        }
         let mut emulator = Self {
             child,
             stdin,
-            stdout: BufReader::new(stdout),
-            line: String::new(),
+            lines,
         };
         let ready = emulator.read_line()?;
         if !ready.contains("\"ready\":true") {
@@ -238,11 +269,15 @@ impl Emulator {
     }
 
     fn read_line(&mut self) -> Result<String, EmulatorError> {
-        self.line.clear();
-        if self.stdout.read_line(&mut self.line)? == 0 {
-            return Err(EmulatorError::Exited);
+        match self.lines.recv_timeout(REPLY_TIMEOUT) {
+            Ok(Ok(line)) if !line.is_empty() => Ok(line.trim_end().to_owned()),
+            Ok(Ok(_)) | Err(RecvTimeoutError::Disconnected) => Err(EmulatorError::Exited),
+            Ok(Err(e)) => Err(EmulatorError::Io(e)),
+            Err(RecvTimeoutError::Timeout) => {
+                let _ = self.child.kill();
+                Err(EmulatorError::Stalled(REPLY_TIMEOUT))
+            }
         }
-        Ok(self.line.trim_end().to_owned())
     }
 
     fn request<T: for<'de> Deserialize<'de>>(&mut self, request: &str) -> Result<T, EmulatorError> {
@@ -576,6 +611,18 @@ impl FirmwareDevice {
     }
 }
 
+/// The scenario's MCU clock as the emulated firmware reads it: the emulated chip powers up
+/// one tick period before the plant's first tick and its clock starts at 0 there, so its
+/// device time is the scenario's minus that instant (same rate). Use it to put plant times
+/// (e.g. camera frames) on the firmware's clock.
+pub fn firmware_clock(clock: &ClockConfig) -> ClockConfig {
+    let power_on_us = first_tick_device_us(clock).saturating_sub(u64::from(TICK_PERIOD_US));
+    ClockConfig {
+        offset_us: clock.offset_us - power_on_us as f64,
+        ..clock.clone()
+    }
+}
+
 fn duty_per_10k(fraction: f64) -> u16 {
     // In 0..=10000 after the clamp (NaN maps to 0).
     (fraction.clamp(0.0, 1.0) * 10_000.0).round() as u16
@@ -592,6 +639,25 @@ mod tests {
         assert_eq!(hex_decode("abc"), None);
         assert_eq!(hex_decode("zz"), None);
         assert_eq!(hex_upper(&[0xe6, 0x61]), "E661");
+    }
+
+    #[test]
+    fn the_firmware_clock_starts_one_tick_before_the_first_tick() {
+        let clock = ClockConfig {
+            offset_us: 1_234_567.0,
+            drift_ppm: 35.0,
+        };
+        let fw = firmware_clock(&clock);
+        // First tick at device time 1 234 500 + 500 = 1 235 000 us; power-on 1 234 500 us.
+        assert_eq!(clock.offset_us - fw.offset_us, 1_234_500.0);
+        assert_eq!(fw.drift_ppm, clock.drift_ppm);
+        let device = SimDevice::new(Scenario {
+            mechanics: crate::scenario::MechanicsSource::Rigid {},
+            clock: clock.clone(),
+            ..Scenario::default()
+        })
+        .expect("rigid device");
+        assert_eq!(device.power_on_device_us(), 1_234_500);
     }
 
     #[test]

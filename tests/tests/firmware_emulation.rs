@@ -196,7 +196,11 @@ fn streams_2_khz_without_loss_for_10_simulated_seconds() {
     // with their deadline, so the spacing is exact even when a tick starts late).
     for pair in samples.windows(2) {
         let dt = pair[1].sample.device_time_us - pair[0].sample.device_time_us;
-        assert_eq!(dt, 500, "sample spacing at {}", pair[0].sample.device_time_us);
+        assert_eq!(
+            dt, 500,
+            "sample spacing at {}",
+            pair[0].sample.device_time_us
+        );
     }
     let span_us = samples.last().map_or(0, |s| s.sample.device_time_us)
         - samples.first().map_or(0, |s| s.sample.device_time_us);
