@@ -587,3 +587,46 @@ fn a_hang_is_reset_by_the_watchdog_and_reported_as_watchdog_reset() {
         status.faults
     );
 }
+
+#[test]
+#[ignore = "needs the firmware ELF and the emulator (scripts/firmware-emulation-test.sh)"]
+fn the_demo_recovers_the_modulus_with_the_firmware_binary() {
+    use host::experiment::simulated::{DemoOptions, demo_scenario, run_demo_with};
+    let out = std::env::temp_dir().join(format!("tactile-fw-demo-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&out);
+    let (modulus, pressure) = (200.0, 6.0);
+    let options = DemoOptions {
+        modulus_kpa: modulus,
+        pressure_kpa: pressure,
+        seed: 3,
+        out: Some(out.clone()),
+        repeats: 5,
+        firmware: Some(elf()),
+        ..DemoOptions::default()
+    };
+    let report = run_demo_with(demo_scenario(modulus, pressure, 3), &options)
+        .expect("the demo runs against the emulated binary");
+    let error = report.modulus_kpa / modulus - 1.0;
+    eprintln!(
+        "E2 {modulus} kPa: fit {:.2} kPa ({:+.2} %) [{:.2}, {:.2}], rms {:.4} mm, {} points, {:.1} s",
+        report.modulus_kpa,
+        100.0 * error,
+        report.ci95_kpa[0],
+        report.ci95_kpa[1],
+        report.rms_residual_mm,
+        report.points,
+        report.elapsed_s
+    );
+    assert!(
+        report.notes.iter().any(|n| n.contains("emulated RP2040")),
+        "{:?}",
+        report.notes
+    );
+    // The library-backed demo's acceptance criterion (tests/demo_end_to_end.rs): within 2 %,
+    // the 95 % interval covering the truth; and the 2 kHz stream arrived whole.
+    assert!(error.abs() < 0.02, "error {:+.2} %", 100.0 * error);
+    assert!(report.ci95_kpa[0] <= modulus && modulus <= report.ci95_kpa[1]);
+    assert_eq!(report.link.blocks_lost, 0);
+    assert_eq!(report.link.frame_errors, 0);
+    let _ = std::fs::remove_dir_all(&out);
+}
