@@ -84,9 +84,16 @@ impl Bench {
             .unwrap_or_else(|| panic!("no emulator report ({:?})", self.control.error()))
     }
 
-    /// Keeps the link alive until the plant's clock has advanced by `sim_s`, adding the
-    /// ground truth and the host's writes of that span to `truth` and `writes` (the probe
-    /// must be on).
+    /// Emulated time now (s since the chip's power-on), from the emulator itself (no
+    /// traffic on the link).
+    fn emulated_s(&self) -> f64 {
+        self.report().t_ns * 1e-9
+    }
+
+    /// Keeps the link alive until the emulated clock has advanced by `sim_s`, then adds the
+    /// ground truth and the host's writes recorded since the probe was started to `truth`
+    /// and `writes`, and restarts the probe. (The probe is taken once per call: taking and
+    /// restarting it while the plant runs could drop the ticks recorded in between.)
     fn run_sim(
         &self,
         link: &mut Link,
@@ -94,23 +101,17 @@ impl Bench {
         truth: &mut Vec<TruthSample>,
         writes: &mut Vec<HostWrite>,
     ) {
-        let probe = self.handle.probe();
-        let start = truth.last().map(|t| t.t_s);
+        let start = self.emulated_s();
         let deadline = Instant::now() + Duration::from_secs_f64(sim_s * 4.0 + 5.0);
-        loop {
+        while self.emulated_s() - start < sim_s {
             link.pump(Duration::from_millis(50)).expect("link alive");
-            let (w, more) = probe.take();
-            probe.start();
-            writes.extend(w);
-            truth.extend(more);
-            if let (Some(first), Some(last)) =
-                (start.or(truth.first().map(|t| t.t_s)), truth.last())
-                && last.t_s - first >= sim_s
-            {
-                return;
-            }
             assert!(Instant::now() < deadline, "the emulated board stalled");
         }
+        let probe = self.handle.probe();
+        let (w, more) = probe.take();
+        probe.start();
+        writes.extend(w);
+        truth.extend(more);
     }
 }
 
@@ -383,20 +384,17 @@ fn a_silent_host_trips_heartbeat_lost_and_the_pump_stops() {
     let probe = bench.handle.probe();
     probe.start();
     bench.run_sim(&mut link, 0.5, &mut truth, &mut writes);
-    // Silence: no request (no ping either) for well over the 1000 ms timeout of the plant's
-    // clock. The probe keeps recording meanwhile.
+    // Silence: no request (no ping either) for well over the 1000 ms timeout of the
+    // emulated clock. The probe keeps recording meanwhile.
     let silent_from = truth.last().map(|t| t.t_s).expect("truth");
+    let start = bench.emulated_s();
     let deadline = Instant::now() + Duration::from_secs(20);
-    loop {
+    while bench.emulated_s() - start < 1.4 {
         std::thread::sleep(Duration::from_millis(100));
-        let (_, more) = probe.take();
-        probe.start();
-        truth.extend(more);
-        if truth.last().is_some_and(|t| t.t_s - silent_from > 1.4) {
-            break;
-        }
         assert!(Instant::now() < deadline, "the emulated board stalled");
     }
+    let (_, more) = probe.take();
+    truth.extend(more);
     let status = link.status().expect("status");
     assert!(
         status.faults.contains(FaultFlags::HEARTBEAT_LOST),
