@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The whole test suite: the repository's text checks, formatting, lints, the no_std checks,
-# every test of the workspace, and the RP2040 firmware's release build with its size
-# budget. This is what CI runs.
+# every test of the workspace, the RP2040 firmware's release build with its size budget, and
+# that binary in the emulated chip against hil-sim's plant (scripts/firmware-emulation-test.sh).
+# This is what CI runs.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -35,6 +36,8 @@ if [ -f firmware/rp2040/Cargo.toml ]; then
         step "firmware/rp2040: size budget"
         scripts/check-firmware-size.sh
     fi
+    step "firmware/rp2040: the release binary in the emulated chip"
+    scripts/firmware-emulation-test.sh
 fi
 
 printf '\nAll checks passed in %ss.\n' "$(( $(date +%s) - start ))"

@@ -42,8 +42,112 @@ use std::time::{Duration, Instant};
 
 use serialport::{SerialPort, TTYPort};
 
-use crate::device::{SimDevice, SimError, SimStats};
+use crate::device::{SimDevice, SimError, SimFrame, SimStats, TruthSample};
+use crate::firmware_emulation::FirmwareDevice;
 use crate::scenario::Scenario;
+
+/// What the bench serves: the library controller in simulated time ([`SimDevice`]) or the
+/// RP2040 binary in an emulated chip ([`FirmwareDevice`]), each in front of the same plant.
+pub trait BenchDevice: Send + std::fmt::Debug {
+    /// The host wrote `bytes` at host time `t_s`.
+    fn host_write(&mut self, bytes: &[u8], t_s: f64);
+    /// Advances by one controller tick.
+    fn step(&mut self);
+    /// Host time of the last tick (s).
+    fn time_s(&self) -> f64;
+    /// Host time of the next tick (s).
+    fn next_tick_s(&self) -> f64;
+    /// Bytes that reached the host by `t_s` (taken).
+    fn take_tx_until(&mut self, t_s: f64) -> Vec<u8>;
+    fn take_frames(&mut self) -> Vec<SimFrame>;
+    fn record_truth(&mut self);
+    fn take_truth(&mut self) -> Vec<TruthSample>;
+    fn set_camera_enabled(&mut self, enabled: bool);
+    fn stats(&self) -> SimStats;
+    /// A freshly powered device of the same kind (the cable plugged back in).
+    fn power_cycle(&self) -> Result<Box<dyn BenchDevice>, SimError>;
+    /// True if the device may simulate slower than real time (an emulated chip): the bench
+    /// then never runs it faster than the wall clock to catch up, so simulated time between
+    /// two host messages is never shorter than the wall time between them.
+    fn may_lag_wall_clock(&self) -> bool {
+        false
+    }
+}
+
+impl BenchDevice for SimDevice {
+    fn host_write(&mut self, bytes: &[u8], t_s: f64) {
+        SimDevice::host_write(self, bytes, t_s);
+    }
+    fn step(&mut self) {
+        SimDevice::step(self);
+    }
+    fn time_s(&self) -> f64 {
+        SimDevice::time_s(self)
+    }
+    fn next_tick_s(&self) -> f64 {
+        SimDevice::next_tick_s(self)
+    }
+    fn take_tx_until(&mut self, t_s: f64) -> Vec<u8> {
+        SimDevice::take_tx_until(self, t_s)
+    }
+    fn take_frames(&mut self) -> Vec<SimFrame> {
+        SimDevice::take_frames(self)
+    }
+    fn record_truth(&mut self) {
+        SimDevice::record_truth(self);
+    }
+    fn take_truth(&mut self) -> Vec<TruthSample> {
+        SimDevice::take_truth(self)
+    }
+    fn set_camera_enabled(&mut self, enabled: bool) {
+        SimDevice::set_camera_enabled(self, enabled);
+    }
+    fn stats(&self) -> SimStats {
+        SimDevice::stats(self)
+    }
+    fn power_cycle(&self) -> Result<Box<dyn BenchDevice>, SimError> {
+        Ok(Box::new(SimDevice::new(self.scenario().clone())?))
+    }
+}
+
+impl BenchDevice for FirmwareDevice {
+    fn host_write(&mut self, bytes: &[u8], _t_s: f64) {
+        FirmwareDevice::host_write(self, bytes);
+    }
+    fn step(&mut self) {
+        FirmwareDevice::step(self);
+    }
+    fn time_s(&self) -> f64 {
+        FirmwareDevice::time_s(self)
+    }
+    fn next_tick_s(&self) -> f64 {
+        FirmwareDevice::next_tick_s(self)
+    }
+    fn take_tx_until(&mut self, t_s: f64) -> Vec<u8> {
+        FirmwareDevice::take_tx_until(self, t_s)
+    }
+    fn take_frames(&mut self) -> Vec<SimFrame> {
+        FirmwareDevice::take_frames(self)
+    }
+    fn record_truth(&mut self) {
+        FirmwareDevice::record_truth(self);
+    }
+    fn take_truth(&mut self) -> Vec<TruthSample> {
+        FirmwareDevice::take_truth(self)
+    }
+    fn set_camera_enabled(&mut self, enabled: bool) {
+        FirmwareDevice::set_camera_enabled(self, enabled);
+    }
+    fn stats(&self) -> SimStats {
+        FirmwareDevice::stats(self)
+    }
+    fn power_cycle(&self) -> Result<Box<dyn BenchDevice>, SimError> {
+        Ok(Box::new(FirmwareDevice::power_cycle(self)?))
+    }
+    fn may_lag_wall_clock(&self) -> bool {
+        true
+    }
+}
 
 /// How simulated time relates to the wall clock.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -78,7 +182,7 @@ impl Default for BenchOptions {
 pub struct BenchHandle {
     pty_path: PathBuf,
     /// Camera frames (see the module docs).
-    pub frames: Receiver<crate::device::SimFrame>,
+    pub frames: Receiver<SimFrame>,
     epoch: Arc<Mutex<Option<Instant>>>,
     stop: Arc<AtomicBool>,
     thread: Option<JoinHandle<SimStats>>,
@@ -126,7 +230,7 @@ pub struct HostWrite {
 struct ProbeState {
     on: bool,
     writes: Vec<HostWrite>,
-    truth: Vec<crate::device::TruthSample>,
+    truth: Vec<TruthSample>,
 }
 
 /// Ground-truth recorder (see the module docs); cheap to clone and `Send + Sync`.
@@ -148,7 +252,7 @@ impl BenchProbe {
     }
 
     /// Stops recording and returns the host writes and the per-tick truth.
-    pub fn take(&self) -> (Vec<HostWrite>, Vec<crate::device::TruthSample>) {
+    pub fn take(&self) -> (Vec<HostWrite>, Vec<TruthSample>) {
         self.state
             .lock()
             .map(|mut s| {
@@ -217,7 +321,23 @@ pub fn start(scenario: Scenario, options: BenchOptions) -> Result<BenchHandle, S
 }
 
 /// As [`start`] with an already built device.
-pub fn start_device(mut device: SimDevice, options: BenchOptions) -> Result<BenchHandle, SimError> {
+pub fn start_device(device: SimDevice, options: BenchOptions) -> Result<BenchHandle, SimError> {
+    start_boxed(Box::new(device), options)
+}
+
+/// As [`start`] with the emulated firmware (see [`crate::firmware_emulation`]).
+pub fn start_firmware(
+    device: FirmwareDevice,
+    options: BenchOptions,
+) -> Result<BenchHandle, SimError> {
+    start_boxed(Box::new(device), options)
+}
+
+/// As [`start`] with any [`BenchDevice`].
+pub fn start_boxed(
+    mut device: Box<dyn BenchDevice>,
+    options: BenchOptions,
+) -> Result<BenchHandle, SimError> {
     let (mut master, slave) = TTYPort::pair().map_err(|e| SimError::Pty(e.to_string()))?;
     let pty_path = slave
         .name()
@@ -259,7 +379,7 @@ pub fn start_device(mut device: SimDevice, options: BenchOptions) -> Result<Benc
                             plug: &plug,
                             probe: &probe,
                         };
-                        serve(&mut device, &mut master, &options, &wiring);
+                        serve(device.as_mut(), &mut master, &options, &wiring);
                     }
                     add_stats(&mut total, device.stats());
                     if stop.load(Ordering::SeqCst) {
@@ -277,8 +397,7 @@ pub fn start_device(mut device: SimDevice, options: BenchOptions) -> Result<Benc
                     }
                     // Plugged back in: a fresh boot on a new port, in real time at once
                     // (the host is attached).
-                    let scenario = device.scenario().clone();
-                    match (SimDevice::new(scenario), TTYPort::pair()) {
+                    match (device.power_cycle(), TTYPort::pair()) {
                         (Ok(fresh), Ok((m, s))) => {
                             device = fresh;
                             let mut m = m;
@@ -322,7 +441,7 @@ fn add_stats(total: &mut SimStats, s: SimStats) {
 
 /// What the serving loop shares with the handle.
 struct Wiring<'a> {
-    frame_tx: &'a SyncSender<crate::device::SimFrame>,
+    frame_tx: &'a SyncSender<SimFrame>,
     stop: &'a AtomicBool,
     epoch: &'a Mutex<Option<Instant>>,
     plug: &'a BenchPlug,
@@ -335,8 +454,17 @@ const AUTO_IDLE_SPEEDUP: f64 = 20.0;
 /// Ticks simulated per batch between I/O polls.
 const TICKS_PER_BATCH: usize = 2;
 
+/// How far a device that may lag the wall clock falls behind before the bench re-anchors
+/// simulated time to now (a few ticks: host bytes wait at most that long in the port).
+const LAG_REANCHOR_S: f64 = 0.002;
+
 /// Serves one powered-up device until the bench stops or the cable is pulled.
-fn serve(device: &mut SimDevice, port: &mut TTYPort, options: &BenchOptions, wiring: &Wiring) {
+fn serve(
+    device: &mut dyn BenchDevice,
+    port: &mut TTYPort,
+    options: &BenchOptions,
+    wiring: &Wiring,
+) {
     let Wiring {
         frame_tx,
         stop,
@@ -400,13 +528,22 @@ fn serve(device: &mut SimDevice, port: &mut TTYPort, options: &BenchOptions, wir
         if real_time {
             let wall = anchor_sim_s + anchor.elapsed().as_secs_f64();
             let mut ticks = 0;
-            while device.next_tick_s() <= wall && ticks < 200 {
+            let max_ticks = if device.may_lag_wall_clock() { 4 } else { 200 };
+            while device.next_tick_s() <= wall && ticks < max_ticks {
                 device.step();
                 ticks += 1;
             }
             if ticks == 0 {
                 let ahead = device.next_tick_s() - wall;
                 std::thread::sleep(Duration::from_secs_f64(ahead.clamp(0.0, 0.001)));
+            } else if device.may_lag_wall_clock() && wall - device.time_s() > LAG_REANCHOR_S {
+                // Behind the wall clock: carry on from here at real-time speed instead of
+                // running faster to catch up.
+                anchor = Instant::now();
+                anchor_sim_s = device.time_s();
+                if let Ok(mut e) = epoch.lock() {
+                    *e = anchor.checked_sub(Duration::from_secs_f64(anchor_sim_s.max(0.0)));
+                }
             }
         } else {
             for _ in 0..TICKS_PER_BATCH {

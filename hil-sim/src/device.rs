@@ -72,6 +72,31 @@ pub struct TxChunk {
     pub bytes: Vec<u8>,
 }
 
+/// What the plant presents at the board's inputs, before any conversion (see
+/// [`SimDevice::step_external`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AnalogInputs {
+    /// Proximity sensor output at ADC0 (V).
+    pub proximity_v: f64,
+    /// Manometer output at ADC1 (V, ratiometric to the ADC reference).
+    pub manometer_v: f64,
+    pub adc_vref_v: f64,
+    /// Noise of one ADC conversion (12-bit LSB rms).
+    pub adc_noise_lsb: f64,
+    /// The newest HX711 result (signed 24-bit counts).
+    pub load_counts: i32,
+    /// Time between two HX711 conversions (its own oscillator).
+    pub hx711_period_s: f64,
+}
+
+/// 16 noise-free 12-bit conversions of `voltage_v`, summed as the firmware's oversampler
+/// does (ground truth of an emulated tick, whose real conversions happen in the emulator).
+fn ideal_adc_counts(voltage_v: f64, vref_v: f64) -> u16 {
+    let code = (voltage_v / vref_v * 4096.0).round().clamp(0.0, 4095.0);
+    // 16 * 4095 = 65520 fits a u16.
+    (code as u16) * (crate::sensors::ADC_CONVERSIONS_PER_TICK as u16)
+}
+
 /// Counters of what happened (for reports and tests).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct SimStats {
@@ -132,6 +157,15 @@ pub enum SimError {
     Scenario(#[from] crate::scenario::ScenarioError),
     #[error("pseudo-terminal: {0}")]
     Pty(String),
+    #[error("firmware emulator: {0}")]
+    Emulator(#[from] crate::firmware_emulation::EmulatorError),
+}
+
+/// Device time (µs) of the first controller tick for an MCU clock: the first tick boundary
+/// at or after the device time of the simulation's epoch.
+pub(crate) fn first_tick_device_us(clock: &crate::sensors::ClockConfig) -> u64 {
+    let period = u64::from(TICK_PERIOD_US);
+    (clock.offset_us.max(0.0) as u64).div_ceil(period) * period
 }
 
 /// Camera phase: the first frame's exposure centre after the epoch (free-running sensor).
@@ -168,7 +202,7 @@ impl SimDevice {
         let contact = mechanics.contact(h0, p0, modulus);
         let pneumatics = Pneumatics::new(scenario.pneumatics.clone(), contact.shell_volume_mm3, p0);
         let period = u64::from(TICK_PERIOD_US);
-        let first_tick_us = (scenario.clock.offset_us.max(0.0) as u64).div_ceil(period) * period;
+        let first_tick_us = first_tick_device_us(&scenario.clock);
         let t0 = scenario.clock.host_s(first_tick_us as f64);
         let mut programme = scenario.programme.clone();
         programme.sort_by(|a, b| a.at_s.total_cmp(&b.at_s));
@@ -461,6 +495,37 @@ impl SimDevice {
         }
     }
 
+    /// The analog side of [`Self::sample_sensors`]: sensor outputs with their noise and
+    /// faults, before any ADC (the emulated RP2040 converts them itself), and the newest
+    /// HX711 result (the emulated HX711 latches it at its own conversion times).
+    fn analog_inputs(&mut self, t_s: f64) -> AnalogInputs {
+        let sc = &self.scenario;
+        let fx = &sc.effects;
+        let x = self.contact.u_s_mm - self.contact.inflation_apex_mm + fx.proximity_error_mm(t_s);
+        let mut u = sc.proximity.voltage_v(x) + self.rng_proximity.normal(sc.proximity.noise_v);
+        match sc.faults.saturation(SaturatedSensor::Proximity, t_s) {
+            Some(Rail::High) => u = sc.adc.vref_v,
+            Some(Rail::Low) => u = 0.0,
+            None => {}
+        }
+        let p_read = self.pneumatics.gauge_kpa()
+            + fx.manometer_offset_kpa
+            + self.rng_manometer.normal(sc.manometer.noise_kpa);
+        let fraction = match sc.faults.saturation(SaturatedSensor::Manometer, t_s) {
+            Some(Rail::High) => sc.manometer.max_output_fraction,
+            Some(Rail::Low) => sc.manometer.min_output_fraction,
+            None => sc.manometer.output_fraction(p_read),
+        };
+        AnalogInputs {
+            proximity_v: u.clamp(0.0, sc.adc.vref_v),
+            manometer_v: fraction * sc.adc.vref_v,
+            adc_vref_v: sc.adc.vref_v,
+            adc_noise_lsb: sc.adc.noise_lsb,
+            load_counts: sc.load_cell.counts(self.contact.load_n, &mut self.rng_load),
+            hx711_period_s: sc.load_cell.period_s(),
+        }
+    }
+
     fn render_frames(&mut self, t_prev: f64, t_now: f64, h_now: f64) {
         let fps = self.scenario.camera.fps;
         loop {
@@ -514,12 +579,75 @@ impl SimDevice {
 
     /// Advances the simulation by one controller tick.
     pub fn step(&mut self) {
-        let t_prev = self.t_s;
-        let dev_now = self.first_tick_us + self.tick * u64::from(TICK_PERIOD_US);
-        let t_now = self.scenario.clock.host_s(dev_now as f64);
-        let dt = t_now - t_prev;
+        let (t_prev, t_now, dev_now) = self.tick_times();
 
         // 1. plant
+        let h_now = self.advance_plant(t_prev, t_now);
+
+        // 2. requests
+        self.deliver_requests(t_now);
+        self.run_programme(t_now, dev_now);
+
+        // 3.-4. sensors, controller, outgoing messages
+        let inputs = self.sample_sensors(t_now);
+        self.outputs = self.controller.tick(dev_now, &inputs);
+        while let Some(message) = self.controller.poll_outgoing() {
+            self.queue_message(&message, t_now);
+        }
+
+        // 5. camera
+        self.render_frames(t_prev, t_now, h_now);
+
+        let faults = self.controller.faults().0;
+        self.finish_tick(t_now, dev_now, h_now, inputs, faults);
+    }
+
+    /// One tick of the plant for a controller that runs elsewhere (the emulated RP2040 of
+    /// [`crate::firmware_emulation`]): `outputs` are what its pins did during the tick
+    /// interval; the plant, the camera and the ground truth advance as in [`Self::step`], the
+    /// built-in controller, the link and the programme do not run. Returns the analog values
+    /// at the board's inputs at the end of the interval.
+    pub fn step_external(&mut self, outputs: Outputs) -> AnalogInputs {
+        let (t_prev, t_now, dev_now) = self.tick_times();
+        self.outputs = outputs;
+        let h_now = self.advance_plant(t_prev, t_now);
+        let analog = self.analog_inputs(t_now);
+        self.render_frames(t_prev, t_now, h_now);
+        let inputs = RawInputs {
+            proximity_counts: ideal_adc_counts(analog.proximity_v, analog.adc_vref_v),
+            manometer_counts: ideal_adc_counts(analog.manometer_v, analog.adc_vref_v),
+            load_counts: Some(analog.load_counts),
+        };
+        self.finish_tick(t_now, dev_now, h_now, inputs, 0);
+        analog
+    }
+
+    /// The analog inputs now (before the first [`Self::step_external`]).
+    pub(crate) fn analog_now(&mut self) -> AnalogInputs {
+        self.analog_inputs(self.t_s)
+    }
+
+    /// Device time (µs) of the next tick.
+    pub fn next_tick_device_us(&self) -> u64 {
+        self.first_tick_us + self.tick * u64::from(TICK_PERIOD_US)
+    }
+
+    /// Device time (µs) one tick period before the first tick: where an emulated
+    /// controller's clock starts.
+    pub fn power_on_device_us(&self) -> u64 {
+        self.first_tick_us - u64::from(TICK_PERIOD_US).min(self.first_tick_us)
+    }
+
+    fn tick_times(&self) -> (f64, f64, u64) {
+        let dev_now = self.next_tick_device_us();
+        let t_now = self.scenario.clock.host_s(dev_now as f64);
+        (self.t_s, t_now, dev_now)
+    }
+
+    /// Step 1 of a tick: stage, effects, gas and contact from `t_prev` to `t_now` under the
+    /// current outputs. Returns the tube travel at `t_now`.
+    fn advance_plant(&mut self, t_prev: f64, t_now: f64) -> f64 {
+        let dt = t_now - t_prev;
         self.stage.motor_steps += i64::from(self.outputs.stage.steps);
         let h_now = self.stage.h_mm_at(self.stage.motor_steps as f64);
         let nominal = self.scenario.sample.modulus_kpa;
@@ -549,21 +677,17 @@ impl SimDevice {
         }
         self.pneumatics
             .set_shell_volume(self.contact.shell_volume_mm3);
+        h_now
+    }
 
-        // 2. requests
-        self.deliver_requests(t_now);
-        self.run_programme(t_now, dev_now);
-
-        // 3.-4. sensors, controller, outgoing messages
-        let inputs = self.sample_sensors(t_now);
-        self.outputs = self.controller.tick(dev_now, &inputs);
-        while let Some(message) = self.controller.poll_outgoing() {
-            self.queue_message(&message, t_now);
-        }
-
-        // 5. camera
-        self.render_frames(t_prev, t_now, h_now);
-
+    fn finish_tick(
+        &mut self,
+        t_now: f64,
+        dev_now: u64,
+        h_now: f64,
+        inputs: RawInputs,
+        faults: u16,
+    ) {
         if let Some(trace) = self.trace.as_mut() {
             trace.push(TruthSample {
                 t_s: t_now,
@@ -573,7 +697,7 @@ impl SimDevice {
                 modulus_kpa: self.modulus_kpa,
                 inputs,
                 outputs: self.outputs,
-                faults: self.controller.faults().0,
+                faults,
             });
         }
         self.h_prev_mm = h_now;

@@ -14,12 +14,16 @@
 //! [`bench::start`] serves it on a pseudo-terminal from its own thread and hands camera
 //! frames out through an `mpsc::Receiver<SimFrame>` (the frame-source interface). The
 //! `hil-sim` binary does the same from the command line.
+//!
+//! The real firmware: [`firmware_emulation::FirmwareDevice`] puts the RP2040 release binary,
+//! running in an emulated chip, in place of the library controller (`hil-sim --firmware`).
 
 pub mod bench;
 pub mod camera;
 pub mod device;
 pub mod effects;
 pub mod faults;
+pub mod firmware_emulation;
 pub mod mechanics;
 pub mod mechanics_source;
 pub mod pneumatics;

@@ -32,6 +32,7 @@ fn options(name: &str, modulus: f64, repeats: u32) -> DemoOptions {
         repeats,
         progress: false,
         u_s_equals_h: false,
+        firmware: None,
     }
 }
 

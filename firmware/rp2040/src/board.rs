@@ -15,6 +15,9 @@
 //! | GP12 | stepper EN (active low)           | A4988 / DRV8825 / TMC2209 enable                        |
 //! | USB  | CDC-ACM to the host               | 1209:7AC7                                               |
 
+/// The PWM slice of GP4 (channel A) and GP5 (channel B).
+pub const PUMP_LED_PWM_SLICE: usize = 2;
+
 /// PWM wrap value: 125 MHz / (4999 + 1) = 25 kHz, above hearing and the pump motor's
 /// electrical time constant.
 pub const PWM_TOP: u16 = 4999;

@@ -1,15 +1,23 @@
 //! Pump and LED PWM (one PWM slice, channels A and B, 25 kHz) and the vent valve GPIO.
+//!
+//! The slice is configured once. A tick that changes a duty writes only the compare
+//! register (one store; the hardware double-buffers it and takes it at the next wrap), so
+//! the divider, the wrap value and the control bits are not rewritten while the pump runs.
+//! `Pwm::set_config` would rewrite all four registers, and `set_duty_cycle` refuses the
+//! compare level TOP + 1 that full duty needs.
 
 use embassy_rp::Peri;
 use embassy_rp::gpio::{Level, Output};
 use embassy_rp::peripherals::{PIN_4, PIN_5, PIN_6, PWM_SLICE2};
 use embassy_rp::pwm::{Config, Pwm};
 
-use crate::board::{PWM_TOP, VENT_CLOSED_LEVEL_HIGH};
+use crate::board::{PUMP_LED_PWM_SLICE, PWM_TOP, VENT_CLOSED_LEVEL_HIGH};
 
 pub struct Actuators {
-    pwm: Pwm<'static>,
-    config: Config,
+    /// Owns the slice and its pins (dropping it would stop the PWM).
+    _pwm: Pwm<'static>,
+    /// Compare levels last written (pump = channel A, LED = channel B).
+    compare: (u16, u16),
     vent: Output<'static>,
 }
 
@@ -40,18 +48,20 @@ impl Actuators {
         config.compare_a = 0;
         config.compare_b = 0;
         Self {
-            pwm: Pwm::new_output_ab(slice, pump, led, config.clone()),
-            config,
+            _pwm: Pwm::new_output_ab(slice, pump, led, config),
+            compare: (0, 0),
             vent: Output::new(vent, vent_level(true)),
         }
     }
 
     pub fn apply(&mut self, pump_duty_per_10k: u16, led_duty_per_10k: u16, vent_open: bool) {
-        let (a, b) = (compare(pump_duty_per_10k), compare(led_duty_per_10k));
-        if a != self.config.compare_a || b != self.config.compare_b {
-            self.config.compare_a = a;
-            self.config.compare_b = b;
-            self.pwm.set_config(&self.config);
+        let levels = (compare(pump_duty_per_10k), compare(led_duty_per_10k));
+        if levels != self.compare {
+            self.compare = levels;
+            embassy_rp::pac::PWM.ch(PUMP_LED_PWM_SLICE).cc().write(|w| {
+                w.set_a(levels.0);
+                w.set_b(levels.1);
+            });
         }
         self.vent.set_level(vent_level(vent_open));
     }

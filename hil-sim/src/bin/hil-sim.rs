@@ -6,13 +6,18 @@
 //!
 //! `hil-sim --run [--scenario FILE] [--seed N]` instead simulates the scenario's duration
 //! (its built-in programme, no host) as fast as possible and prints the timing.
+//!
+//! `--firmware FILE.elf` puts the RP2040 binary, running in the emulated chip
+//! (`emulator/`, Node.js), in place of the library controller; `--unique-id HEX16` sets its
+//! flash's unique ID (the serial number it reports).
 
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
 
-use hil_sim::bench::{BenchOptions, Pacing, start};
+use hil_sim::bench::{BenchHandle, BenchOptions, Pacing, start, start_firmware};
 use hil_sim::device::SimDevice;
+use hil_sim::firmware_emulation::{EmulatorConfig, FirmwareDevice};
 use hil_sim::scenario::Scenario;
 
 struct Args {
@@ -22,10 +27,12 @@ struct Args {
     camera: bool,
     run: bool,
     save_curves: Option<PathBuf>,
+    firmware: Option<PathBuf>,
+    unique_id: Option<[u8; 8]>,
     help: bool,
 }
 
-const USAGE: &str = "usage: hil-sim [--scenario FILE] [--seed N] [--pacing auto|realtime|fast] [--no-camera] [--run] [--save-curves DIR]
+const USAGE: &str = "usage: hil-sim [--scenario FILE] [--seed N] [--pacing auto|realtime|fast] [--no-camera] [--run] [--save-curves DIR] [--firmware FILE.elf [--unique-id HEX16]]
 
 Serves the simulated bench on a pseudo-terminal (its path is printed) until killed.
   --scenario FILE   scenario TOML (default: the built-in gelatin sample on the shipped table)
@@ -34,6 +41,9 @@ Serves the simulated bench on a pseudo-terminal (its path is printed) until kill
   --no-camera       do not render frames
   --run             simulate the scenario's duration without a host and print the timing
   --save-curves DIR solve a `solve` scenario's curves once and write them as JSON
+  --firmware ELF    run this RP2040 firmware in the emulated chip (needs Node.js and
+                    `npm ci` in emulator/) instead of the library controller
+  --unique-id HEX16 the emulated flash's unique ID (the serial the firmware reports)
   -h, --help        this text";
 
 fn parse_args() -> Result<Args, String> {
@@ -44,6 +54,8 @@ fn parse_args() -> Result<Args, String> {
         camera: true,
         run: false,
         save_curves: None,
+        firmware: None,
+        unique_id: None,
         help: false,
     };
     let mut it = std::env::args().skip(1);
@@ -76,11 +88,32 @@ fn parse_args() -> Result<Args, String> {
             "--save-curves" => {
                 args.save_curves = Some(it.next().ok_or("--save-curves needs a directory")?.into());
             }
+            "--firmware" => {
+                args.firmware = Some(it.next().ok_or("--firmware needs an ELF file")?.into());
+            }
+            "--unique-id" => {
+                let v = it.next().ok_or("--unique-id needs 16 hex digits")?;
+                args.unique_id = Some(
+                    parse_unique_id(&v)
+                        .ok_or_else(|| format!("--unique-id: `{v}` is not 16 hex digits"))?,
+                );
+            }
             "-h" | "--help" => args.help = true,
             other => return Err(format!("unknown argument `{other}` (try --help)")),
         }
     }
     Ok(args)
+}
+
+fn parse_unique_id(text: &str) -> Option<[u8; 8]> {
+    if text.len() != 16 || !text.is_ascii() {
+        return None;
+    }
+    let mut id = [0u8; 8];
+    for (i, byte) in id.iter_mut().enumerate() {
+        *byte = u8::from_str_radix(text.get(2 * i..2 * i + 2)?, 16).ok()?;
+    }
+    Some(id)
 }
 
 fn main() -> ExitCode {
@@ -110,6 +143,35 @@ fn main() -> ExitCode {
     }
     if let Some(dir) = &args.save_curves {
         return save_curves(&scenario, dir);
+    }
+    if let Some(elf) = &args.firmware {
+        let mut config = EmulatorConfig::new(elf);
+        if let Some(id) = args.unique_id {
+            config.unique_id = id;
+        }
+        config.seed = scenario.seed;
+        let built = Instant::now();
+        let mut device = match FirmwareDevice::new(scenario, config) {
+            Ok(d) => d,
+            Err(e) => {
+                eprintln!("hil-sim: {e}");
+                return ExitCode::from(2);
+            }
+        };
+        device.set_camera_enabled(args.camera);
+        if args.run {
+            return run_firmware(device, built);
+        }
+        let options = BenchOptions {
+            pacing: args.pacing,
+            camera: args.camera,
+            ..BenchOptions::default()
+        };
+        return serve_until_killed(start_firmware(device, options));
+    }
+    if args.unique_id.is_some() {
+        eprintln!("hil-sim: --unique-id needs --firmware");
+        return ExitCode::from(2);
     }
     if args.run {
         let duration = scenario.duration_s;
@@ -142,14 +204,18 @@ fn main() -> ExitCode {
         );
         return ExitCode::SUCCESS;
     }
-    let handle = match start(
+    serve_until_killed(start(
         scenario,
         BenchOptions {
             pacing: args.pacing,
             camera: args.camera,
             ..BenchOptions::default()
         },
-    ) {
+    ))
+}
+
+fn serve_until_killed(started: Result<BenchHandle, hil_sim::device::SimError>) -> ExitCode {
+    let handle = match started {
         Ok(h) => h,
         Err(e) => {
             eprintln!("hil-sim: {e}");
@@ -161,6 +227,39 @@ fn main() -> ExitCode {
     loop {
         while handle.frames.try_recv().is_ok() {}
         std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+}
+
+/// `--run --firmware`: the emulated board without a host for the scenario's duration.
+fn run_firmware(mut device: FirmwareDevice, built: Instant) -> ExitCode {
+    let duration = device.plant().scenario().duration_s;
+    let setup = built.elapsed().as_secs_f64();
+    let start_run = Instant::now();
+    let t0 = device.time_s();
+    while device.time_s() - t0 < duration {
+        device.step();
+        device.take_tx_until(f64::INFINITY);
+        device.take_frames();
+    }
+    let wall = start_run.elapsed().as_secs_f64();
+    match device.report() {
+        Ok(r) => {
+            println!(
+                "emulated {duration:.1} s in {wall:.3} s wall ({:.2} simulated s per wall s; setup {setup:.3} s): \
+                 {} control ticks, longest {:.1} us (emulated, no flash wait states), USB {:04X}:{:04X} serial {}",
+                duration / wall,
+                r.ticks,
+                r.longest_tick_ns / 1e3,
+                r.usb.vid.unwrap_or(0),
+                r.usb.pid.unwrap_or(0),
+                r.usb.serial.as_deref().unwrap_or("-"),
+            );
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("hil-sim: {e}");
+            ExitCode::from(1)
+        }
     }
 }
 

@@ -12,9 +12,10 @@
 use std::sync::mpsc::Receiver;
 use std::time::Duration;
 
-use hil_sim::bench::{BenchHandle, BenchOptions, start, start_device};
+use hil_sim::bench::{BenchDevice, BenchHandle, BenchOptions, start, start_boxed};
 use hil_sim::camera::{CameraRenderer, FrameScene, PixelFormat};
 use hil_sim::device::{SimDevice, SimFrame};
+use hil_sim::firmware_emulation::{EmulatorConfig, FirmwareDevice, firmware_clock};
 use hil_sim::rng::SimRng;
 use hil_sim::scenario::Scenario;
 
@@ -49,23 +50,34 @@ pub fn start_and_connect(scenario: Scenario) -> Result<(BenchHandle, Link), SimR
     connect_bench(bench)
 }
 
+/// A device being built on another thread (see [`build_device_in_background`]).
+pub type DeviceBuild = std::thread::JoinHandle<Result<Box<dyn BenchDevice>, String>>;
+
 /// Builds the simulated device of `scenario` (its fem-core solves) on another thread, so
-/// the solve overlaps other work; [`start_device_and_connect`] takes the result.
+/// the solve overlaps other work; [`start_device_and_connect`] takes the result. With
+/// `firmware`, the controller is that RP2040 binary in the emulated chip instead of the
+/// `firmware` library.
 pub fn build_device_in_background(
     scenario: Scenario,
-) -> std::thread::JoinHandle<Result<SimDevice, String>> {
-    std::thread::spawn(move || SimDevice::new(scenario).map_err(|e| e.to_string()))
+    firmware: Option<EmulatorConfig>,
+) -> DeviceBuild {
+    std::thread::spawn(move || match firmware {
+        None => SimDevice::new(scenario)
+            .map(|d| Box::new(d) as Box<dyn BenchDevice>)
+            .map_err(|e| e.to_string()),
+        Some(config) => FirmwareDevice::new(scenario, config)
+            .map(|d| Box::new(d) as Box<dyn BenchDevice>)
+            .map_err(|e| e.to_string()),
+    })
 }
 
 /// Starts a device built by [`build_device_in_background`] and connects to it.
-pub fn start_device_and_connect(
-    device: std::thread::JoinHandle<Result<SimDevice, String>>,
-) -> Result<(BenchHandle, Link), SimRunError> {
+pub fn start_device_and_connect(device: DeviceBuild) -> Result<(BenchHandle, Link), SimRunError> {
     let device = device
         .join()
         .map_err(|_| SimRunError::Sim("the simulated device's build thread panicked".into()))?
         .map_err(SimRunError::Sim)?;
-    let bench = start_device(device, BenchOptions::default())
+    let bench = start_boxed(device, BenchOptions::default())
         .map_err(|e| SimRunError::Sim(e.to_string()))?;
     connect_bench(bench)
 }
@@ -352,6 +364,9 @@ pub struct DemoOptions {
     /// Calibrate the proximity sensor with the paper's u_s = h instead of fem-core's
     /// rigid-sample u_s(h) (to measure what the correction changes).
     pub u_s_equals_h: bool,
+    /// Run this RP2040 firmware ELF in the emulated chip as the bench's controller
+    /// (`hil_sim::firmware_emulation`) instead of the `firmware` library.
+    pub firmware: Option<std::path::PathBuf>,
 }
 
 /// What the demo printed (and `--json` emits).
@@ -470,8 +485,21 @@ pub fn run_demo_with(scenario: Scenario, options: &DemoOptions) -> Result<DemoRe
 
     // The fem-core solves (the measured sample's device, the rigid bench's device, the
     // host's rigid-sample u_s(h)) run on their own threads and overlap the calibrations.
-    let measured_device = build_device_in_background(scenario.clone());
-    let rigid_device = build_device_in_background(rigid_scenario(&scenario, pressure));
+    let emulator = options.firmware.as_ref().map(|elf| {
+        let mut config = EmulatorConfig::new(elf);
+        config.seed = scenario.seed;
+        config
+    });
+    if let Some(config) = &emulator {
+        notes.push(format!(
+            "controller: the firmware binary {} in the emulated RP2040 (rp2040js), serial {}",
+            config.elf.display(),
+            config.serial()
+        ));
+    }
+    let measured_device = build_device_in_background(scenario.clone(), emulator.clone());
+    let rigid_device =
+        build_device_in_background(rigid_scenario(&scenario, pressure), emulator.clone());
     let rigid_solve = (!options.u_s_equals_h).then(|| {
         std::thread::spawn(move || {
             RigidSampleCurve::solve(
@@ -526,7 +554,12 @@ pub fn run_demo_with(scenario: Scenario, options: &DemoOptions) -> Result<DemoRe
 
     // 3. the experiment, through the one pipeline every caller uses
     let true_modulus = scenario.sample.modulus_kpa;
-    let scenario_clock = scenario.clock.clone();
+    // Frames carry plant time; the device clock they are put on is the controller's (the
+    // emulated chip's clock starts at its power-on).
+    let scenario_clock = match &emulator {
+        Some(_) => firmware_clock(&scenario.clock),
+        None => scenario.clock.clone(),
+    };
     let scenario_json = serde_json::to_value(&scenario).unwrap_or_default();
     let (bench, mut link) = start_device_and_connect(measured_device)?;
     let model = LutModel::new(&lut_file.lut).map_err(|e| DemoError::Lut {

@@ -1,7 +1,8 @@
 //! `tactile demo`: the whole instrument against the emulated bench (hil-sim in-process on a
 //! pseudo-terminal): calibrate (rigid-sample proximity sweep, camera px/mm from a reference
 //! disc, manometer zero, load tare), measure (`--repeats` indentations), fit, write the
-//! record, print the modulus with its interval.
+//! record, print the modulus with its interval. `--firmware ELF` puts the RP2040 binary, in
+//! the emulated chip, in place of the firmware library.
 
 use clap::Args;
 use std::path::PathBuf;
@@ -37,6 +38,11 @@ pub struct DemoArgs {
     /// of fem-core's rigid-sample u_s(h).
     #[arg(long)]
     pub u_s_equals_h: bool,
+    /// Run this RP2040 firmware ELF (e.g. firmware/rp2040/target/thumbv6m-none-eabi/release/
+    /// tactile-rp2040) in the emulated chip as the bench's controller instead of the firmware
+    /// library (needs Node.js and `npm ci` in emulator/).
+    #[arg(long, value_name = "ELF")]
+    pub firmware: Option<PathBuf>,
     /// Print one JSON object.
     #[arg(long)]
     pub json: bool,
@@ -53,6 +59,7 @@ pub fn run(args: DemoArgs) -> ExitCode {
         repeats: args.repeats,
         progress: !args.json,
         u_s_equals_h: args.u_s_equals_h,
+        firmware: args.firmware,
     };
     match run_demo(&options) {
         Ok(report) => {
