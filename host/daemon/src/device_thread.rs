@@ -328,8 +328,18 @@ impl DeviceThread {
         let lost = result.as_ref().err().map(link_lost);
         let _ = reply.send(result.map(|_| ()).map_err(|e| e.to_string()));
         match lost {
-            Some(Some(reason)) => Err(ServeEnd::Lost(reason)),
+            Some(Some(reason)) => Err(self.link_ended(reason)),
             _ => Ok(()),
+        }
+    }
+
+    /// Why the link failed: a stop that fired on it meanwhile (the lock makes every later
+    /// write fail) is a stop, not a lost link.
+    fn link_ended(&self, reason: String) -> ServeEnd {
+        if self.shared.switch.is_locked() {
+            ServeEnd::Stopped
+        } else {
+            ServeEnd::Lost(reason)
         }
     }
 
@@ -354,7 +364,7 @@ impl DeviceThread {
                         let end = jobs::run_experiment(self, &mut link, job);
                         if let Some(end) = end {
                             return match end {
-                                jobs::JobEnd::Lost(r) => ServeEnd::Lost(r),
+                                jobs::JobEnd::Lost(r) => self.link_ended(r),
                                 jobs::JobEnd::Stopped => ServeEnd::Stopped,
                             };
                         }
@@ -362,7 +372,7 @@ impl DeviceThread {
                             link.start_stream(self.config.idle_stream_hz, ChannelSet::ALL)
                             && let Some(r) = link_lost(&e)
                         {
-                            return ServeEnd::Lost(r);
+                            return self.link_ended(r);
                         }
                     }
                     JobKind::Calibration => self.start_calibration(job.id),
@@ -370,7 +380,7 @@ impl DeviceThread {
                 continue;
             }
             if let Err(e) = link.receive_for(Duration::from_millis(20)) {
-                return ServeEnd::Lost(e.to_string());
+                return self.link_ended(e.to_string());
             }
             link.drain_samples();
             #[cfg(feature = "sim")]
@@ -410,7 +420,7 @@ impl DeviceThread {
                     }
                     Err(e) => {
                         if let Some(r) = link_lost(&e) {
-                            return ServeEnd::Lost(r);
+                            return self.link_ended(r);
                         }
                     }
                 }
