@@ -13,6 +13,7 @@ const PIN_STEP = 10;
 const PIN_DIR = 11;
 const PIN_EN = 12;
 const ADC_VREF_V = 3.3;
+const TICK_PERIOD_NS = 500_000;
 
 /** Seeded normal deviates (xorshift64* and Box-Muller), reproducible for a seed. */
 export class Rng {
@@ -115,7 +116,7 @@ export class Board {
     this.stepsTotal = 0;
     this.stepsWhileDisabled = 0;
     this.hx711 = { ready: false, bit: 0, value: 0, conversions: 0, reads: 0 };
-    this.tick = { inTick: false, startNs: 0, longestNs: 0, count: 0 };
+    this.tick = { inTick: false, startNs: 0, longestNs: 0, count: 0, phases: [] };
     this.adcConversions = 0;
 
     rp.gpio[PIN_PUMP].addListener((v) => this.pump.change(v === HIGH, rp.clock.nanos));
@@ -141,6 +142,7 @@ export class Board {
         // The control tick starts with its ADC burst ...
         this.tick.inTick = true;
         this.tick.startNs = rp.clock.nanos;
+        if (this.tick.phases.length < 1e6) this.tick.phases.push(rp.clock.nanos % TICK_PERIOD_NS);
       }
       this.adcConversions++;
       adc.channelValues[channel] = this.adcCode(channel);
@@ -201,6 +203,31 @@ export class Board {
       h.reads++;
       dout.setInputValue(true);
     }
+  }
+
+  /**
+   * Longest delay of a control tick's start (its first ADC conversion) behind its place on
+   * the 500 µs grid, whose phase is taken as the earliest start seen (so the figure is
+   * relative to the quickest wake-up, a few µs after the deadline).
+   */
+  maxTickLatencyNs() {
+    const phases = this.tick.phases;
+    if (phases.length === 0) return null;
+    // The grid phase: the start that most ticks follow closely is the smallest residue
+    // after rotating the residues so that the largest gap between them wraps around.
+    const sorted = Float64Array.from(phases).sort();
+    let gapAt = 0;
+    let gap = sorted[0] + TICK_PERIOD_NS - sorted[sorted.length - 1];
+    for (let i = 1; i < sorted.length; i++) {
+      if (sorted[i] - sorted[i - 1] > gap) {
+        gap = sorted[i] - sorted[i - 1];
+        gapAt = i;
+      }
+    }
+    const phase = sorted[gapAt];
+    let worst = 0;
+    for (const r of phases) worst = Math.max(worst, (r - phase + TICK_PERIOD_NS) % TICK_PERIOD_NS);
+    return worst;
   }
 
   /** Outputs averaged over the window since the last call. */

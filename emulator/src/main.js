@@ -209,6 +209,7 @@ class Emulator {
           t_ns: this.nowNs,
           ticks: this.ticks,
           longest_tick_ns: this.longestTickNs,
+          max_tick_latency_ns: this.board.maxTickLatencyNs(),
           resets: this.resets,
           usb: {
             vid: device ? device.vid : null,

@@ -151,6 +151,9 @@ pub struct EmulatorReport {
     /// Longest control tick: first ADC conversion to watchdog feed, in emulated time (no
     /// flash wait states or bus contention are modelled, so real silicon is slower).
     pub longest_tick_ns: f64,
+    /// Longest delay of a tick's start behind its 500 µs grid position (since the last
+    /// chip reset; relative to the quickest start), in emulated time.
+    pub max_tick_latency_ns: Option<f64>,
     pub resets: Vec<ResetEvent>,
     pub usb: UsbReport,
     pub pump_pwm: PwmReport,

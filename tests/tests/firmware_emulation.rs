@@ -208,6 +208,12 @@ fn streams_2_khz_without_loss_for_10_simulated_seconds() {
     let span_us = samples.last().map_or(0, |s| s.sample.device_time_us)
         - samples.first().map_or(0, |s| s.sample.device_time_us);
     let span_s = span_us as f64 / 1e6;
+    let report = bench.report();
+    eprintln!(
+        "longest tick {:.1} us, latest tick start {:.1} us behind the grid (emulated)",
+        report.longest_tick_ns / 1e3,
+        report.max_tick_latency_ns.unwrap_or(f64::NAN) / 1e3
+    );
     eprintln!(
         "{} samples over {span_s:.2} simulated s in {:.1} s wall ({:.2} simulated s per wall s)",
         samples.len(),

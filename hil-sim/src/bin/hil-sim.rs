@@ -246,10 +246,11 @@ fn run_firmware(mut device: FirmwareDevice, built: Instant) -> ExitCode {
         Ok(r) => {
             println!(
                 "emulated {duration:.1} s in {wall:.3} s wall ({:.2} simulated s per wall s; setup {setup:.3} s): \
-                 {} control ticks, longest {:.1} us (emulated, no flash wait states), USB {:04X}:{:04X} serial {}",
+                 {} control ticks, longest {:.1} us, latest start {:.1} us behind the grid (emulated, no flash wait states), USB {:04X}:{:04X} serial {}",
                 duration / wall,
                 r.ticks,
                 r.longest_tick_ns / 1e3,
+                r.max_tick_latency_ns.unwrap_or(f64::NAN) / 1e3,
                 r.usb.vid.unwrap_or(0),
                 r.usb.pid.unwrap_or(0),
                 r.usb.serial.as_deref().unwrap_or("-"),
