@@ -35,33 +35,7 @@ fn calibrate_then_measure_against_the_pty_bench() {
     let cal_dir = dir.join("calibration");
 
     // calibrations on the rigid bench
-    let (bench, mut link) = start_and_connect(rigid_scenario(&scenario, 6.0)).unwrap();
-    let mut record = CalibrationRecord::new(link.info().serial.as_str(), "sim");
-    record.manometer_zero_kpa = manometer_zero_kpa(&mut link, Duration::from_millis(500)).unwrap();
-    record.load_tare_residual_n = tare_load(&mut link).unwrap();
-    let plan = SweepPlan {
-        pressure_kpa: 6.0,
-        start_mm: surface - 0.3,
-        end_mm: surface + 1.6,
-        speed_mm_per_s: 1.0,
-        contact_load_n: 0.005,
-    };
-    let data = proximity_sweep(
-        &mut link,
-        &plan,
-        record.manometer_zero_kpa,
-        &indicatif::ProgressBar::hidden(),
-    )
-    .unwrap();
-    drop(link);
-    bench.stop();
-    let rigid =
-        RigidSampleCurve::solve(6.0, DEMO_RIGID_MESH_LEVEL, DEMO_STEPS, DEMO_MAX_DEPTH_MM).unwrap();
-    record.set_proximity(&fit_sweep(&data, plan.contact_load_n, Some(&rigid)).unwrap());
-    let px = px_per_mm_from_reference_disc(&scenario, &[1.2, 2.0, 2.8, 3.4]).unwrap();
-    record.px_per_mm = Some(px.px_per_mm);
-    record.px_per_mm_sigma = Some(px.px_per_mm_sigma);
-    record.px_offset_px = px.offset_px;
+    let record = calibrate(&scenario, &[6.0]);
     save_record(&cal_dir, &record).unwrap();
     let (_, stored) = load_latest(&cal_dir).unwrap();
     assert_eq!(stored, record);
@@ -146,7 +120,7 @@ fn calibrate_then_measure_against_the_pty_bench() {
 }
 
 /// Proximity calibrations at `pressures` on the rigid bench of `scenario`, with the camera
-/// scale and the manometer zero: what `tactile calibrate` stores.
+/// scale, the manometer zero and the load tare: what `tactile calibrate` stores.
 fn calibrate(scenario: &hil_sim::scenario::Scenario, pressures: &[f64]) -> CalibrationRecord {
     let surface = scenario.stage.surface_mm;
     let mut record: Option<CalibrationRecord> = None;
@@ -156,6 +130,7 @@ fn calibrate(scenario: &hil_sim::scenario::Scenario, pressures: &[f64]) -> Calib
             let mut r = CalibrationRecord::new(link.info().serial.as_str(), "sim");
             r.manometer_zero_kpa =
                 manometer_zero_kpa(&mut link, Duration::from_millis(500)).unwrap();
+            r.load_tare_residual_n = tare_load(&mut link).unwrap();
             r
         });
         let plan = SweepPlan {
