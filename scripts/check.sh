@@ -19,8 +19,8 @@ if [ -f firmware/rp2040/Cargo.toml ]; then
     (cd firmware/rp2040 && cargo fmt --check)
 fi
 
-step "no_std: protocol and firmware for thumbv6m-none-eabi"
-cargo check -p protocol -p firmware --target thumbv6m-none-eabi
+step "no_std: protocol and the controller logic for thumbv6m-none-eabi"
+cargo check -p protocol -p controller --target thumbv6m-none-eabi
 cargo check -p protocol --features defmt --target thumbv6m-none-eabi
 
 step "cargo clippy (host workspace)"

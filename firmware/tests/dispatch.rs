@@ -1,13 +1,13 @@
 //! Dispatch: every Request variant gets exactly one Ack or Nack with its seq, and the
-//! refusals named in `firmware::dispatch`.
+//! refusals named in `controller::dispatch`.
 
 mod support;
 
-use firmware::device_constants::{
+use controller::device_constants::{
     ADC_FULL_SCALE_COUNTS, LOAD_COUNTS_PER_N, MANOMETER_KPA_PER_COUNT, MANOMETER_ZERO_COUNTS,
     STAGE_STEPS_PER_MM,
 };
-use firmware::{Controller, ControllerConfig};
+use controller::{Controller, ControllerConfig};
 use protocol::{
     ChannelSet, DeviceMessage, FrameDecoder, MAX_FRAME_LEN, NackCode, PROTOCOL_VERSION, PidGains,
     PressureMode, Reply, Request, RequestFrame, encode_frame,
@@ -93,7 +93,7 @@ fn every_request_gets_exactly_one_reply_with_its_seq_over_the_wire() {
             now += 500;
             ctl.tick(
                 now,
-                &firmware::RawInputs {
+                &controller::RawInputs {
                     proximity_counts: 100,
                     manometer_counts: MANOMETER_ZERO_COUNTS + (k % 3),
                     load_counts: Some(1000),

@@ -15,8 +15,8 @@
 
 mod support;
 
-use firmware::ControllerConfig;
-use firmware::controller::DEFAULT_GAINS;
+use controller::ControllerConfig;
+use controller::controller::DEFAULT_GAINS;
 use protocol::{FaultFlags, PidGains, Request};
 use support::Bench;
 

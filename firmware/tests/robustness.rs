@@ -3,8 +3,8 @@
 //! answers every request exactly once with its seq, and never drives the pump while a
 //! pump-stopping fault is latched.
 
-use firmware::safety::PUMP_OFF_FAULTS;
-use firmware::{Controller, ControllerConfig, RawInputs};
+use controller::safety::PUMP_OFF_FAULTS;
+use controller::{Controller, ControllerConfig, RawInputs};
 use protocol::{
     ChannelSet, DeviceMessage, MAX_FRAME_LEN, PidGains, Request, RequestFrame, encode_frame,
 };

@@ -1,10 +1,10 @@
-//! Every safety trip of the supervisor (`firmware::safety`), its latching, its single report
+//! Every safety trip of the supervisor (`controller::safety`), its latching, its single report
 //! and its clearing.
 
 mod support;
 
-use firmware::device_constants::{MANOMETER_MAX_VALID_COUNTS, manometer_counts};
-use firmware::{ControllerConfig, Outputs, RawInputs};
+use controller::device_constants::{MANOMETER_MAX_VALID_COUNTS, manometer_counts};
+use controller::{ControllerConfig, Outputs, RawInputs};
 use protocol::{DeviceMessage, FaultFlags, NackCode, PressureMode, Reply, Request, StatusFlags};
 use support::{Bench, ManometerFault};
 

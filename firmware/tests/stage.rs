@@ -1,7 +1,7 @@
 //! Stage trapezoidal profiles: peak speed, total steps, duration, soft limits, decelerating
 //! stop, re-targeting, at both tick rates (hil-sim's 1 kHz and the board's 2 kHz).
 
-use firmware::stage::{Stage, StageError};
+use controller::stage::{Stage, StageError};
 
 struct Run {
     total: i64,

@@ -3,7 +3,7 @@
 
 mod support;
 
-use firmware::TICK_PERIOD_US;
+use controller::TICK_PERIOD_US;
 use protocol::{
     ChannelSet, DeviceMessage, MAX_FRAME_LEN, MAX_SAMPLES_PER_BLOCK, Request, Sample, SampleBlock,
     StatusFlags, encode_frame,
@@ -203,7 +203,7 @@ fn overrun_drops_blocks_counts_them_and_keeps_numbering() {
         bench.now_us = t;
         bench.ctl.tick(
             t,
-            &firmware::RawInputs {
+            &controller::RawInputs {
                 proximity_counts: 1,
                 manometer_counts: 6554 + (t % 7) as u16,
                 load_counts: None,

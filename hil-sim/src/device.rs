@@ -21,7 +21,7 @@
 
 use std::collections::VecDeque;
 
-use firmware::{Controller, ControllerConfig, Outputs, RawInputs, TICK_PERIOD_US};
+use controller::{Controller, ControllerConfig, Outputs, RawInputs, TICK_PERIOD_US};
 use protocol::{DeviceMessage, FrameDecoder, MAX_FRAME_LEN, Request, RequestFrame, encode_frame};
 
 use crate::camera::{CameraRenderer, FrameScene, PixelFormat};

@@ -27,7 +27,7 @@ use std::sync::mpsc::{Receiver, RecvTimeoutError, channel};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use firmware::{Outputs, StageOutput, TICK_PERIOD_US};
+use controller::{Outputs, StageOutput, TICK_PERIOD_US};
 use serde::{Deserialize, Serialize};
 
 use crate::device::{

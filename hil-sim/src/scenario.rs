@@ -120,7 +120,7 @@ pub struct StageConfig {
 impl Default for StageConfig {
     fn default() -> Self {
         Self {
-            steps_per_mm: f64::from(firmware::device_constants::STAGE_STEPS_PER_MM),
+            steps_per_mm: f64::from(controller::device_constants::STAGE_STEPS_PER_MM),
             surface_mm: 1.0,
         }
     }

@@ -14,13 +14,13 @@
 //!   conversion every 1/rate seconds of the HX711's own oscillator.
 //! - MCU clock: device time t_dev = offset + t (1 + drift_ppm 1e-6), t the host (true) time.
 
-use firmware::sampling::Oversampler;
+use controller::sampling::Oversampler;
 use serde::{Deserialize, Serialize};
 
 use crate::rng::SimRng;
 
 /// ADC conversions summed per tick (the firmware's oversampling count).
-pub const ADC_CONVERSIONS_PER_TICK: usize = firmware::device_constants::OVERSAMPLE_COUNT as usize;
+pub const ADC_CONVERSIONS_PER_TICK: usize = controller::device_constants::OVERSAMPLE_COUNT as usize;
 
 /// The RP2040's ADC.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -35,7 +35,7 @@ pub struct AdcConfig {
 impl Default for AdcConfig {
     fn default() -> Self {
         Self {
-            vref_v: f64::from(firmware::device_constants::ADC_VREF_MV) / 1000.0,
+            vref_v: f64::from(controller::device_constants::ADC_VREF_MV) / 1000.0,
             noise_lsb: 1.5,
         }
     }
@@ -148,8 +148,8 @@ pub struct LoadCellConfig {
 impl Default for LoadCellConfig {
     fn default() -> Self {
         Self {
-            rate_sps: f64::from(firmware::device_constants::LOAD_RATE_SPS),
-            counts_per_n: 0.97 * f64::from(firmware::device_constants::LOAD_COUNTS_PER_N),
+            rate_sps: f64::from(controller::device_constants::LOAD_RATE_SPS),
+            counts_per_n: 0.97 * f64::from(controller::device_constants::LOAD_COUNTS_PER_N),
             offset_counts: 41_000.0,
             noise_counts: 40.0,
             rate_error: 0.01,
@@ -208,7 +208,7 @@ impl ClockConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use firmware::device_constants::{MANOMETER_KPA_PER_COUNT, manometer_kpa};
+    use controller::device_constants::{MANOMETER_KPA_PER_COUNT, manometer_kpa};
 
     #[test]
     fn noiseless_adc_oversampling_quantises_to_sixteen_codes() {

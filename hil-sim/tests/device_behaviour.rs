@@ -5,7 +5,7 @@
 
 use std::path::Path;
 
-use firmware::safety::OVERPRESSURE_CLEAR_MARGIN_KPA;
+use controller::safety::OVERPRESSURE_CLEAR_MARGIN_KPA;
 use hil_sim::device::SimDevice;
 use hil_sim::scenario::Scenario;
 use protocol::FaultFlags;
@@ -93,12 +93,12 @@ fn overpressure_trips_within_one_control_tick() {
     dev.record_truth();
     dev.run_until(1.2);
     let truth = dev.take_truth();
-    let limit = f64::from(firmware::device_constants::OVERPRESSURE_LIMIT_KPA);
+    let limit = f64::from(controller::device_constants::OVERPRESSURE_LIMIT_KPA);
     // The first tick whose manometer reading is above the limit.
     let first = truth
         .iter()
         .position(|t| {
-            f64::from(firmware::device_constants::manometer_kpa(
+            f64::from(controller::device_constants::manometer_kpa(
                 t.inputs.manometer_counts,
             )) > limit
         })
@@ -141,7 +141,7 @@ fn heartbeat_loss_stops_the_pump_and_the_stage() {
     dev.record_truth();
     dev.run_until(3.0);
     let truth = dev.take_truth();
-    let timeout_s = f64::from(firmware::device_constants::HEARTBEAT_TIMEOUT_MS) * 1e-3;
+    let timeout_s = f64::from(controller::device_constants::HEARTBEAT_TIMEOUT_MS) * 1e-3;
     let trip = truth
         .iter()
         .find(|t| FaultFlags(t.faults).contains(FaultFlags::HEARTBEAT_LOST))

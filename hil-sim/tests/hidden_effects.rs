@@ -55,7 +55,7 @@ fn a_manometer_offset_shifts_the_true_pressure_not_the_reading() {
         let p_read = late
             .iter()
             .map(|t| {
-                f64::from(firmware::device_constants::manometer_kpa(
+                f64::from(controller::device_constants::manometer_kpa(
                     t.inputs.manometer_counts,
                 ))
             })

@@ -128,7 +128,7 @@ fn hello_reports_the_library_constants_and_the_flash_unique_id() {
     assert_eq!(info.serial.as_str(), "DE63502107A12C39");
     assert_eq!(info.serial.as_str(), bench.config.serial());
     // Every other field is what the library controller reports (the binary adds nothing).
-    let mut reference = firmware::Controller::new(firmware::ControllerConfig::default());
+    let mut reference = controller::Controller::new(controller::ControllerConfig::default());
     let hello = protocol::RequestFrame {
         seq: 1,
         request: Request::Hello {

@@ -5,7 +5,7 @@
 //! arrive intact gets exactly one reply with its sequence number; damaged ones are counted by
 //! the device as receive errors and never answered wrongly.
 
-use firmware::{Controller, ControllerConfig, RawInputs, TICK_PERIOD_US};
+use controller::{Controller, ControllerConfig, RawInputs, TICK_PERIOD_US};
 use protocol::{
     ChannelSet, DeviceMessage, FrameDecoder, MAX_FRAME_LEN, PROTOCOL_VERSION, Reply, Request,
     RequestFrame, encode_frame,
@@ -51,7 +51,7 @@ impl DeviceEnd {
             self.now_us += u64::from(TICK_PERIOD_US);
             let inputs = RawInputs {
                 proximity_counts: 30_000 + (i % 7) as u16,
-                manometer_counts: firmware::device_constants::MANOMETER_ZERO_COUNTS
+                manometer_counts: controller::device_constants::MANOMETER_ZERO_COUNTS
                     + (i % 5) as u16,
                 load_counts: (i % 12 == 0).then_some(1000 + i as i32),
             };

@@ -1,12 +1,12 @@
 //! ADC0 (proximity) and ADC1 (manometer): 16 conversions per channel per tick, summed by
 //! the library's oversampler into 16-bit counts.
 
+use controller::device_constants::OVERSAMPLE_COUNT;
+use controller::sampling::Oversampler;
 use embassy_rp::Peri;
 use embassy_rp::adc::{Adc, Blocking, Channel, Config};
 use embassy_rp::gpio::Pull;
 use embassy_rp::peripherals::{ADC, PIN_26, PIN_27};
-use firmware::device_constants::OVERSAMPLE_COUNT;
-use firmware::sampling::Oversampler;
 
 pub struct AnalogInputs {
     adc: Adc<'static, Blocking>,

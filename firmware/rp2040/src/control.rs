@@ -7,9 +7,9 @@
 //! while 2 kHz sample blocks were being framed), and a late time stamp made the streamer
 //! skip a sample slot at 2 kHz. The controller's time base stays the exact 500 µs grid.
 
+use controller::{RawInputs, TICK_PERIOD_US};
 use embassy_rp::watchdog::Watchdog;
 use embassy_time::{Duration, Instant, Timer};
-use firmware::{RawInputs, TICK_PERIOD_US};
 
 use crate::analog::AnalogInputs;
 use crate::outputs::Actuators;

@@ -6,8 +6,8 @@
 //! DOUT has a pull-up: with no HX711 fitted it never falls, no conversion is ever reported,
 //! and the controller's load-cell timeout stays disarmed.
 
+use controller::sampling::hx711_counts_from_bits;
 use embassy_rp::gpio::{Input, Output};
-use firmware::sampling::hx711_counts_from_bits;
 
 use crate::shared::LOAD_CONVERSION;
 

@@ -26,6 +26,7 @@ mod shared;
 mod stepper;
 mod usb_link;
 
+use controller::ControllerConfig;
 use defmt::info;
 use embassy_executor::{InterruptExecutor, Spawner};
 use embassy_rp::gpio::{Input, Level, Output, Pull};
@@ -33,7 +34,6 @@ use embassy_rp::interrupt;
 use embassy_rp::interrupt::{InterruptExt, Priority};
 use embassy_rp::watchdog::{ResetReason, Watchdog};
 use embassy_time::Instant;
-use firmware::ControllerConfig;
 use {defmt_rtt as _, panic_probe as _};
 
 /// Runs the step generator at a priority above thread mode.

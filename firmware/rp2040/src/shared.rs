@@ -5,10 +5,10 @@
 
 use core::cell::{Cell, RefCell};
 
+use controller::{Controller, ControllerConfig};
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::{CriticalSectionRawMutex, ThreadModeRawMutex};
 use embassy_sync::signal::Signal;
-use firmware::{Controller, ControllerConfig};
 
 static CONTROLLER: Mutex<ThreadModeRawMutex, RefCell<Option<Controller>>> =
     Mutex::new(RefCell::new(None));

@@ -1,12 +1,12 @@
 //! Step pulse generation. The controller's stage integrates its trapezoidal profile once per
-//! tick and hands over the microsteps travelled in that tick (`firmware::stage`); this task
+//! tick and hands over the microsteps travelled in that tick (`controller::stage`); this task
 //! emits them evenly spaced over the next tick period (500 µs), so the pulse rate follows
 //! the profile with one period of latency. Steps that arrive while a batch is being emitted
 //! accumulate and are emitted next, so none is lost.
 
+use controller::TICK_PERIOD_US;
 use embassy_rp::gpio::Output;
 use embassy_time::{Duration, Instant, Timer};
-use firmware::TICK_PERIOD_US;
 
 use crate::board::STEPPER_ENABLE_ACTIVE_LOW;
 use crate::shared::{PENDING_STEPS, STEPPER_ENABLE, STEPS_READY};

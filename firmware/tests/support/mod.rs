@@ -4,8 +4,8 @@
 
 pub mod plant;
 
-use firmware::device_constants::manometer_counts;
-use firmware::{Controller, ControllerConfig, Outputs, RawInputs, TICK_PERIOD_US};
+use controller::device_constants::manometer_counts;
+use controller::{Controller, ControllerConfig, Outputs, RawInputs, TICK_PERIOD_US};
 use plant::PneumaticPlant;
 use protocol::{DeviceMessage, Reply, Request, RequestFrame};
 

@@ -224,7 +224,7 @@ fn decimate(v: &[(f64, f64)], n: usize) -> Vec<(f64, f64)> {
 }
 
 /// (t_s from the first sample, manometer kPa) from `samples.csv`: columns `host_time_us`
-/// and `manometer_counts`, p = (counts - 6554) x 9.5367e-4 kPa (firmware::device_constants).
+/// and `manometer_counts`, p = (counts - 6554) x 9.5367e-4 kPa (controller::device_constants).
 pub fn pressure_trace(samples_csv: &Path) -> Result<Vec<(f64, f64)>, String> {
     let text = std::fs::read_to_string(samples_csv)
         .map_err(|e| format!("{}: {e}", samples_csv.display()))?;

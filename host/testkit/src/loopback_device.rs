@@ -1,12 +1,12 @@
-//! An in-process device: the real `firmware::Controller` behind a [`Transport`], ticked in
+//! An in-process device: the real `controller::Controller` behind a [`Transport`], ticked in
 //! real time (device time = offset + (1 + drift) * elapsed host time, a tick every
-//! [`firmware::TICK_PERIOD_US`]), with a small bench plant and injectable faults. For the
+//! [`controller::TICK_PERIOD_US`]), with a small bench plant and injectable faults. For the
 //! link's tests; it is not hil-sim (no finite-element contact, no camera).
 
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
-use firmware::{Controller, ControllerConfig, Outputs, RawInputs, TICK_PERIOD_US};
+use controller::{Controller, ControllerConfig, Outputs, RawInputs, TICK_PERIOD_US};
 use protocol::{FrameDecoder, MAX_FRAME_LEN, RequestFrame};
 
 use link::{Transport, TransportError};
@@ -43,7 +43,7 @@ impl SimpleBench {
             contact_at_mm: 1.0,
             parabola_v: [-0.12, -0.55, 2.4],
             stiffness_n_per_mm: 2.0,
-            steps_per_mm: f64::from(firmware::device_constants::STAGE_STEPS_PER_MM),
+            steps_per_mm: f64::from(controller::device_constants::STAGE_STEPS_PER_MM),
             rng: seed | 1,
             load_phase_us: 0,
         }
@@ -77,14 +77,14 @@ impl LoopbackPlant for SimpleBench {
         let [a, b, c] = self.parabola_v;
         let volts = a * u * u + b * u + c;
         let proximity_counts = (volts / 3.3 * 65535.0 + 3.0 * self.noise()).clamp(0.0, 65535.0);
-        let manometer = f64::from(firmware::device_constants::manometer_counts(
+        let manometer = f64::from(controller::device_constants::manometer_counts(
             self.pressure_kpa as f32,
         )) + 3.0 * self.noise();
-        let load_period_us = 1_000_000 / u64::from(firmware::device_constants::LOAD_RATE_SPS);
+        let load_period_us = 1_000_000 / u64::from(controller::device_constants::LOAD_RATE_SPS);
         let load_counts = if now_us >= self.load_phase_us + load_period_us {
             self.load_phase_us = now_us;
             let n = self.stiffness_n_per_mm * u + 0.0005 * self.noise();
-            Some((n * f64::from(firmware::device_constants::LOAD_COUNTS_PER_N)) as i32)
+            Some((n * f64::from(controller::device_constants::LOAD_COUNTS_PER_N)) as i32)
         } else {
             None
         };
