@@ -9,7 +9,7 @@ use std::sync::mpsc::Receiver;
 use std::time::{Duration, Instant};
 
 use fem_core::lut::Lut;
-use protocol::{ChannelSet, Request};
+use protocol::{ChannelSet, endpoints};
 
 use super::api::{Event, JobKind, JobState, LinkGap, fault_names, unix_ms};
 use super::fit_worker::FitWorker;
@@ -312,18 +312,18 @@ impl DeviceThread {
                     .map(|t| t.manometer_zero_kpa)
                     .unwrap_or(0.0);
                 let r = if kpa == 0.0 {
-                    link.request(Request::PressureOff)
+                    link.call(endpoints::PressureOff)
                 } else {
-                    link.request(Request::Vent { open: false }).and_then(|_| {
-                        link.request(Request::SetPressure {
+                    link.call(endpoints::Vent { open: false }).and_then(|_| {
+                        link.call(endpoints::SetPressure {
                             setpoint_kpa: (kpa + zero) as f32,
                         })
                     })
                 };
                 (r, reply)
             }
-            Command::Vent { open, reply } => (link.request(Request::Vent { open }), reply),
-            Command::ClearFault { reply } => (link.request(Request::ClearFault), reply),
+            Command::Vent { open, reply } => (link.call(endpoints::Vent { open }), reply),
+            Command::ClearFault { reply } => (link.call(endpoints::ClearFault).map(|_| ()), reply),
         };
         let lost = result.as_ref().err().map(link_lost);
         let _ = reply.send(result.map(|_| ()).map_err(|e| e.to_string()));

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Duration;
 
-use protocol::Request;
+use protocol::endpoints;
 
 use super::api::{Event, ExperimentRequest, Job, JobState};
 use super::device_thread::DeviceSource;
@@ -337,12 +337,16 @@ pub fn run_experiment(dt: &mut DeviceThread, link: &mut Link, job: Job) -> Optio
                 return Some(JobEnd::Lost(r));
             }
             // Still connected: leave the device safe.
-            for r in [Request::StopStage, Request::PressureOff] {
-                if let Err(le) = link.request(r)
-                    && let Some(reason) = link_lost(&le)
-                {
-                    return Some(JobEnd::Lost(reason));
-                }
+            // (each is sent even if the other is refused; a lost link ends at once)
+            if let Err(le) = link.call(endpoints::StopStage)
+                && let Some(reason) = link_lost(&le)
+            {
+                return Some(JobEnd::Lost(reason));
+            }
+            if let Err(le) = link.call(endpoints::PressureOff)
+                && let Some(reason) = link_lost(&le)
+            {
+                return Some(JobEnd::Lost(reason));
             }
             None
         }
