@@ -19,8 +19,7 @@ use experiment::record_meta::{RecordMeta, RecordStatus};
 use experiment::records::RecordDir;
 use experiment::simulated::{
     DEMO_MAX_DEPTH_MM, DEMO_RIGID_MESH_LEVEL, DEMO_STEPS, SimRadiusSource, demo_fit_lut_path,
-    demo_scenario, px_per_mm_from_reference_disc, reference_frame, rigid_scenario,
-    start_and_connect,
+    demo_scenario, px_per_mm_from_reference_disc, rigid_scenario, start_and_connect,
 };
 use fit::LutModel;
 
@@ -60,23 +59,14 @@ fn calibrate_then_measure_against_the_pty_bench() {
         &plan,
         &out,
         &model,
-        &LutInfo {
-            path: demo_fit_lut_path().display().to_string(),
-            sha256: lut_file.sha256.clone(),
-        },
+        &fit_table_info(&lut_file),
         &RunContext {
             settle: Duration::from_millis(700),
             ..RunContext::default()
         },
         &indicatif::ProgressBar::hidden(),
         &|e| RecordStatus::Failed(e.to_string()),
-        |link, px| {
-            let reference = reference_frame(link, &bench, Duration::from_millis(300))
-                .map_err(|e| e.to_string())?;
-            let s =
-                SimRadiusSource::new(&bench, &clock, reference, px).map_err(|e| e.to_string())?;
-            Ok(Box::new(s))
-        },
+        |link, px| sim_frames(link, &bench, &clock, px),
     )
     .unwrap();
     drop(link);
@@ -199,23 +189,14 @@ fn auto_pressure_measures_a_stiff_sample_at_the_higher_pressure() {
         &probe,
         &record,
         &model,
-        &LutInfo {
-            path: demo_fit_lut_path().display().to_string(),
-            sha256: lut_file.sha256.clone(),
-        },
+        &fit_table_info(&lut_file),
         &RunContext {
             settle: Duration::from_millis(700),
             ..RunContext::default()
         },
         &indicatif::ProgressBar::hidden(),
         &|e| RecordStatus::Failed(e.to_string()),
-        |link, px| {
-            let reference = reference_frame(link, &bench, Duration::from_millis(50))
-                .map_err(|e| e.to_string())?;
-            let s =
-                SimRadiusSource::new(&bench, &clock, reference, px).map_err(|e| e.to_string())?;
-            Ok(Box::new(s))
-        },
+        |link, px| sim_frames(link, &bench, &clock, px),
     )
     .unwrap();
     drop(link);
@@ -243,4 +224,24 @@ fn auto_pressure_measures_a_stiff_sample_at_the_higher_pressure() {
         report.modulus_kpa
     );
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The simulated bench's frames for the pipeline (reference after 50 ms of settling).
+fn sim_frames<'a>(
+    link: &mut link::Link,
+    bench: &'a hil_sim::bench::BenchHandle,
+    clock: &hil_sim::sensors::ClockConfig,
+    px: vision::px_per_mm::PxPerMmCalibration,
+) -> Result<Box<dyn experiment::RadiusSource + 'a>, String> {
+    let source = SimRadiusSource::start(link, bench, clock, px, Duration::from_millis(50))
+        .map_err(|e| e.to_string())?;
+    Ok(Box::new(source))
+}
+
+/// What meta.json records about the fit table.
+fn fit_table_info(file: &fem_core::lut::LutFile) -> LutInfo {
+    LutInfo {
+        path: demo_fit_lut_path().display().to_string(),
+        sha256: file.sha256.clone(),
+    }
 }

@@ -378,12 +378,16 @@ impl<'s> FrameBench<'s> {
         let inner: Box<dyn RadiusSource + 'a> = match self.source {
             #[cfg(feature = "sim")]
             DeviceSource::Sim { bench, scenario } => {
-                use experiment::simulated::{SimRadiusSource, reference_frame};
-                let reference = reference_frame(link, bench, Duration::from_millis(50))
-                    .map_err(|e| e.to_string())?;
+                use experiment::simulated::SimRadiusSource;
                 Box::new(
-                    SimRadiusSource::new(bench, &scenario.clock, reference, px)
-                        .map_err(|e| e.to_string())?,
+                    SimRadiusSource::start(
+                        link,
+                        bench,
+                        &scenario.clock,
+                        px,
+                        Duration::from_millis(50),
+                    )
+                    .map_err(|e| e.to_string())?,
                 )
             }
             DeviceSource::Port { .. } => {

@@ -132,6 +132,20 @@ impl std::fmt::Debug for SimRadiusSource<'_> {
 }
 
 impl<'b> SimRadiusSource<'b> {
+    /// Lets the link run for `settle`, takes the next frame as the no-contact reference
+    /// (the inflated, untouched shell) and starts measuring: the frame source the
+    /// experiment pipeline asks for on the simulated bench.
+    pub fn start(
+        link: &mut Link,
+        bench: &'b BenchHandle,
+        scenario_clock: &hil_sim::sensors::ClockConfig,
+        px_per_mm: PxPerMmCalibration,
+        settle: Duration,
+    ) -> Result<Self, SimRunError> {
+        let reference = reference_frame(link, bench, settle)?;
+        Self::new(bench, scenario_clock, reference, px_per_mm)
+    }
+
     pub fn new(
         bench: &'b BenchHandle,
         scenario_clock: &hil_sim::sensors::ClockConfig,
@@ -598,10 +612,14 @@ pub fn run_demo_with(scenario: Scenario, options: &DemoOptions) -> Result<DemoRe
         &progress,
         &|e| super::record_meta::RecordStatus::Failed(e.to_string()),
         |link, px| {
-            let reference = reference_frame(link, &bench, Duration::from_millis(50))
-                .map_err(|e| e.to_string())?;
-            let source = SimRadiusSource::new(&bench, &scenario_clock, reference, px)
-                .map_err(|e| e.to_string())?;
+            let source = SimRadiusSource::start(
+                link,
+                &bench,
+                &scenario_clock,
+                px,
+                Duration::from_millis(50),
+            )
+            .map_err(|e| e.to_string())?;
             Ok(Box::new(source))
         },
     );
