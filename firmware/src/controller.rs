@@ -27,19 +27,21 @@ use crate::sampling::LoadCell;
 use crate::stage::Stage;
 use crate::stream::{Streamer, TickSample};
 
-/// Default pressure PID gains, tuned on the pneumatic plant of the host tests
-/// (`tests/support/plant.rs`: 3 mL of gas, 200 mL/min pump with a 30 ms spin-up lag, plant
-/// gain ~110 kPa/s per unit duty, leak pole ~2.6 /s) by a grid search over kp, ki, kd and
-/// the slew rate for the shortest 2 % settling at 6 and 15 kPa with < 2.5 % overshoot.
-/// The plant is nearly an integrator, so the integral is kept small (its zero at ~1 rad/s,
-/// far below the ~60 rad/s crossover) and the feed-forward (the holding duty per kPa)
-/// carries the steady state; the derivative supplies the phase the pump's lag takes.
-/// The host replaces them with `SetPidGains` for its own bench.
+/// Default pressure PID gains, tuned on the sensor's pneumatic plant model (the
+/// `pneumatic-plant` crate, which the emulated bench runs too: 3 mL of gas, a 200 mL/min pump
+/// stalling at 40 kPa with a 30 ms spin-up lag, a bleed of 30 mm^3/s per kPa) by a grid search
+/// over kp, ki, kd and the feed-forward for the shortest 2 % settling at 6 and 15 kPa with
+/// < 2.5 % overshoot, then checked on plants 30..50 % off the nominal one. The plant is nearly
+/// an integrator, so the integral is kept small and the feed-forward (the holding duty per
+/// kPa, between the plant's 0.011 at 6 kPa and 0.014 at 15 kPa) carries the steady state; the
+/// derivative supplies the phase the pump's lag takes (more of it amplifies the manometer's
+/// noise into a ripple larger than the 2 % band). The host replaces them with `SetPidGains`
+/// for its own bench.
 pub const DEFAULT_GAINS: PidGains = PidGains {
-    kp: 0.6,
+    kp: 0.9,
     ki: 0.5,
-    kd: 0.01,
-    feed_forward_per_kpa: 0.018,
+    kd: 0.02,
+    feed_forward_per_kpa: 0.0125,
 };
 
 /// Default setpoint slew rate (a 0 -> 15 kPa step ramps in 0.15 s, about the plant's own

@@ -1,15 +1,16 @@
-//! The pressure PID on the pneumatic plant model (support/plant.rs): step responses to the
-//! paper's two operating points, a broken-integral control case, and rejection of the
-//! sudden volume change caused by indenting the shell.
+//! The pressure PID on the pneumatic plant model (`pneumatic-plant`, the emulated bench's
+//! own): step responses to the paper's two operating points, the same on plants that differ
+//! from the nominal one, a broken-integral control case, and rejection of the sudden volume
+//! change caused by indenting the shell.
 //!
 //! Acceptance, and why:
 //! - settling band ±2 % of the setpoint: hil-sim's bench tests hold the pressure within 2 %
 //!   while indenting, and the FE model's pressure grid is read at that precision;
 //! - settling time <= 0.5 s from the command: the host waits for the pressure before an
-//!   indentation that itself lasts ~1.7 s; the default gains settle in 0.11 s (6 kPa) and
-//!   0.22 s (15 kPa) on this plant, so 0.5 s leaves a 2x margin for model changes while a
-//!   loop without integral action never settles (`proportional_only_misses_the_band`) and
-//!   the plant's own open-loop time constant is ~0.4 s;
+//!   indentation that itself lasts ~1.7 s; the default gains settle in 0.14 s (6 kPa) and
+//!   0.24 s (15 kPa) on this plant, so 0.5 s leaves a 2x margin for model changes
+//!   (`default_gains_tolerate_plant_variations`); the plant's own open-loop time constant is
+//!   ~0.4 s;
 //! - overshoot <= 5 %: at 15 kPa that is 15.75 kPa, keeping 4 kPa of margin below the 20 kPa
 //!   overpressure trip with the shell's stiffness changing by no more than the 2 % band.
 
@@ -46,7 +47,7 @@ fn step_response(bench: &mut Bench, setpoint: f64) -> StepResponse {
     StepResponse {
         settling_s: (last_outside_us - start) as f64 * 1e-6,
         overshoot_pct: ((max_kpa - setpoint) / setpoint * 100.0).max(0.0),
-        final_kpa: bench.plant.pressure_kpa,
+        final_kpa: bench.plant.gauge_kpa(),
         max_kpa,
     }
 }
@@ -95,11 +96,71 @@ fn setpoint_change_6_to_15_kpa_is_bumpless() {
     assert!(r.settling_s <= 0.5 && r.overshoot_pct <= 5.0);
 }
 
-/// Control case: with the integral (and feed-forward) removed the loop cannot hold the
-/// setpoint against the leak, and the same acceptance test fails. This is what makes the
-/// assertions above able to catch a broken PID.
+/// The default gains on plants that differ from the nominal one as a real sensor may (another
+/// pump, longer tubing, a tighter or leakier shell): every step still settles within 0.5 s, and
+/// overshoots by at most 10 % (0.6 kPa at 6 kPa; at 15 kPa 1.5 kPa, still 3.5 kPa below the
+/// overpressure trip). The pump's lag is what the loop's phase margin depends on most: at
+/// 60 ms (twice the nominal) the 6 kPa step overshoots by ~20 %, so the variants stop at 45 ms.
 #[test]
-fn proportional_only_misses_the_band() {
+fn default_gains_tolerate_plant_variations() {
+    use pneumatic_plant::{Pneumatics, PneumaticsConfig};
+    let nominal = PneumaticsConfig::default();
+    let with = |f: &dyn Fn(&mut PneumaticsConfig)| {
+        let mut c = nominal.clone();
+        f(&mut c);
+        c
+    };
+    let variants = [
+        ("pump lag 15 ms", with(&|c| c.pump_time_constant_s = 0.015)),
+        ("pump lag 45 ms", with(&|c| c.pump_time_constant_s = 0.045)),
+        ("dead volume -30 %", with(&|c| c.dead_volume_mm3 *= 0.7)),
+        ("dead volume +50 %", with(&|c| c.dead_volume_mm3 *= 1.5)),
+        (
+            "leak x0.5",
+            with(&|c| c.leak_conductance_mm3_per_s_per_kpa *= 0.5),
+        ),
+        (
+            "leak x2",
+            with(&|c| c.leak_conductance_mm3_per_s_per_kpa *= 2.0),
+        ),
+        (
+            "pump flow -30 %",
+            with(&|c| c.pump_free_flow_mm3_per_s *= 0.7),
+        ),
+        (
+            "pump flow +30 %",
+            with(&|c| c.pump_free_flow_mm3_per_s *= 1.3),
+        ),
+    ];
+    let mut failures = Vec::new();
+    for (name, cfg) in variants {
+        for setpoint in [6.0, 15.0] {
+            let mut bench = Bench::new();
+            bench.plant = Pneumatics::new(cfg.clone(), support::SHELL_VOLUME_MM3, 0.0);
+            bench.run_quiet_ms(50);
+            let r = step_response(&mut bench, setpoint);
+            println!(
+                "{name}: 0 -> {setpoint} kPa settles (2 %) in {:.3} s, overshoot {:.2} %",
+                r.settling_s, r.overshoot_pct
+            );
+            if r.settling_s > 0.5 || r.overshoot_pct > 10.0 {
+                failures.push(format!(
+                    "{name}, {setpoint} kPa: {:.3} s, {:.2} %",
+                    r.settling_s, r.overshoot_pct
+                ));
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{failures:#?}");
+}
+
+/// Control case: with the integral and the feed-forward removed the loop cannot hold the
+/// setpoint against the leak. Its steady offset is the proportional loop's textbook one
+/// (holding duty / Kp: 0.216 / 0.9 = 0.24 kPa at 15 kPa), while the full controller's is
+/// below a tenth of it: the regulation tests above measure the integral action, and a broken
+/// integral would show here.
+#[test]
+fn proportional_only_keeps_the_textbook_offset() {
     let config = ControllerConfig {
         gains: PidGains {
             ki: 0.0,
@@ -109,15 +170,21 @@ fn proportional_only_misses_the_band() {
         ..ControllerConfig::default()
     };
     let mut bench = Bench::with_config(config);
-    let r = step_response(&mut bench, 6.0);
-    // Offset = holding duty / Kp = 0.1 / 0.6 kPa = 0.17 kPa = 2.8 % of 6 kPa.
-    let expected_offset = bench.plant.holding_duty(r.final_kpa) / f64::from(DEFAULT_GAINS.kp);
+    let r = step_response(&mut bench, 15.0);
+    let expected_offset =
+        bench.plant.holding_duty(r.final_kpa).expect("below stall") / f64::from(DEFAULT_GAINS.kp);
+    let offset = 15.0 - r.final_kpa;
+    // 0.01 kPa: ten times the manometer's quantisation (0.001 kPa a count) after 3 s.
     assert!(
-        ((6.0 - r.final_kpa) - expected_offset).abs() < 0.05,
-        "{}",
-        r.final_kpa
+        (offset - expected_offset).abs() < 0.01,
+        "offset {offset}, expected {expected_offset}"
     );
-    assert!(r.settling_s > 1.0);
+    let mut full = Bench::new();
+    let full_offset = (15.0 - step_response(&mut full, 15.0).final_kpa).abs();
+    assert!(
+        full_offset < 0.1 * offset,
+        "PID offset {full_offset} vs P-only {offset}"
+    );
 }
 
 #[test]
@@ -126,11 +193,12 @@ fn rejects_a_sudden_volume_shrink() {
         let mut bench = Bench::new();
         step_response(&mut bench, setpoint);
         // The shell is indented: the gas volume shrinks by 2 % at once.
-        let v = bench.plant.volume_ml;
-        let p_abs = bench.plant.p_atm_kpa + bench.plant.pressure_kpa;
-        bench.plant.set_volume_ml(v * 0.98);
+        let v = bench.plant.volume_mm3();
+        let p_abs = bench.plant.config().atmosphere_kpa + bench.plant.gauge_kpa();
+        let dead = bench.plant.config().dead_volume_mm3;
+        bench.plant.set_shell_volume(v * 0.98 - dead);
         // Boyle: the jump is p_abs * (1/0.98 - 1), 2.2 kPa at 6 kPa, 2.4 kPa at 15 kPa.
-        let jump = bench.plant.pressure_kpa - setpoint;
+        let jump = bench.plant.gauge_kpa() - setpoint;
         assert!((jump - p_abs * (1.0 / 0.98 - 1.0)).abs() < 0.05 * p_abs * 0.0204);
         let start = bench.now_us;
         let mut last_outside_us = start;
@@ -150,9 +218,9 @@ fn rejects_a_sudden_volume_shrink() {
         // the integral to unwind too.
         assert!(recovery_s <= 1.5, "recovery {recovery_s:.3} s");
         // The controller reacted: the pump was throttled well below its holding duty.
-        let holding = bench.plant.holding_duty(setpoint) * 10_000.0;
+        let holding = bench.plant.holding_duty(setpoint).expect("below stall") * 10_000.0;
         assert!(f64::from(min_duty) < 0.5 * holding, "min duty {min_duty}");
-        assert!((bench.plant.pressure_kpa - setpoint).abs() <= 0.02 * setpoint);
+        assert!((bench.plant.gauge_kpa() - setpoint).abs() <= 0.02 * setpoint);
         assert_eq!(bench.ctl.faults(), FaultFlags(0));
     }
 }
@@ -163,7 +231,7 @@ fn regulating_again_after_pressure_off_recovers_quickly() {
     step_response(&mut bench, 15.0);
     bench.ack(Request::PressureOff);
     bench.run_quiet_ms(100);
-    let dropped = bench.plant.pressure_kpa;
+    let dropped = bench.plant.gauge_kpa();
     assert!(dropped < 14.0, "{dropped}");
     // Back to 15 kPa from ~13 kPa: the PID starts from its feed-forward (settles in 0.07 s
     // here). A PID that took over the stopped pump's zero duty "bumplessly" would start

@@ -87,12 +87,12 @@ fn just_below_the_limit_does_not_trip() {
 fn latched_until_cleared_and_cleared_only_when_the_cause_is_gone() {
     let mut bench = regulating_bench(15.0);
     // A pump running away: the plant is driven to 21 kPa by force.
-    bench.plant.pressure_kpa = 21.0;
+    bench.plant.set_gauge_kpa(21.0);
     bench.tick();
     assert!(bench.last.vent_open);
     assert_eq!(bench.last.pump_duty_per_10k, 0);
     // While the pressure is still high, ClearFault keeps the fault.
-    bench.plant.pressure_kpa = 19.0; // inside the 2 kPa hysteresis
+    bench.plant.set_gauge_kpa(19.0); // inside the 2 kPa hysteresis
     bench.tick();
     let Reply::FaultsRemaining(left) = bench.ack(Request::ClearFault) else {
         panic!()
@@ -119,7 +119,7 @@ fn latched_until_cleared_and_cleared_only_when_the_cause_is_gone() {
     }
     // The vent (opened by the trip) empties the shell; the latch holds meanwhile.
     bench.run_quiet_ms(300);
-    assert!(bench.plant.pressure_kpa < 1.0);
+    assert!(bench.plant.gauge_kpa() < 1.0);
     assert!(bench.ctl.faults().contains(FaultFlags::OVERPRESSURE));
     assert!(bench.last.vent_open && bench.last.pump_duty_per_10k == 0);
     let Reply::FaultsRemaining(left) = bench.ack(Request::ClearFault) else {
@@ -131,7 +131,7 @@ fn latched_until_cleared_and_cleared_only_when_the_cause_is_gone() {
     // Works again.
     bench.ack(Request::SetPressure { setpoint_kpa: 6.0 });
     bench.run_quiet_ms(500);
-    assert!((bench.plant.pressure_kpa - 6.0).abs() < 0.12);
+    assert!((bench.plant.gauge_kpa() - 6.0).abs() < 0.12);
     assert!(!bench.last.vent_open);
 }
 
@@ -283,7 +283,7 @@ fn faults_show_in_every_sample_status() {
         channels: protocol::ChannelSet::ALL,
     });
     bench.run_quiet_ms(20);
-    bench.plant.pressure_kpa = 25.0;
+    bench.plant.set_gauge_kpa(25.0);
     bench.run_quiet_ms(50);
     let reports = fault_reports(&bench);
     assert_eq!(reports.len(), 1);

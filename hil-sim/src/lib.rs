@@ -26,7 +26,7 @@ pub mod faults;
 pub mod firmware_emulation;
 pub mod mechanics;
 pub mod mechanics_source;
-pub mod pneumatics;
+pub use pneumatic_plant as pneumatics;
 pub mod rng;
 pub mod scenario;
 pub mod sensors;

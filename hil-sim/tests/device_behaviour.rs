@@ -149,8 +149,19 @@ fn heartbeat_loss_stops_the_pump_and_the_stage() {
     // Trips one timeout after the last request (the clock's offset and ppm are small).
     assert!((trip.t_s - (1.0 + timeout_s)).abs() < 2e-3, "{}", trip.t_s);
     assert_eq!(trip.outputs.pump_duty_per_10k, 0);
-    let before = truth.iter().rfind(|t| t.t_s < trip.t_s).unwrap();
-    assert!(before.outputs.pump_duty_per_10k > 0);
+    // The pump was regulating before the trip (it may idle for a moment while the indentation
+    // compresses the shell, as the pump cannot suck) and never runs after it.
+    assert!(
+        truth
+            .iter()
+            .any(|t| t.t_s < trip.t_s && t.t_s > trip.t_s - 1.0 && t.outputs.pump_duty_per_10k > 0)
+    );
+    assert!(
+        truth
+            .iter()
+            .filter(|t| t.t_s >= trip.t_s)
+            .all(|t| t.outputs.pump_duty_per_10k == 0)
+    );
     // The stage decelerates and stops short of its 1.5 mm target.
     let end = truth.last().unwrap();
     assert_eq!(end.outputs.stage.steps, 0);

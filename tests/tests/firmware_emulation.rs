@@ -331,11 +331,13 @@ fn pressure_steps_to_6_and_15_kpa_regulate_as_the_library_controller_does() {
         let fw = step_figures(&truth, t_cmd, f64::from(setpoint));
         eprintln!("{setpoint} kPa: binary {fw:?}");
         eprintln!("{setpoint} kPa: library {lib:?}");
-        // Both read as the figures above; the +-2 % band is reported, not asserted: on
-        // hil-sim's default plant the controller overshoots 6 kPa by ~3.5 % and takes ~1.2 s
-        // to come back within 2 % (the library does the same; see
-        // docs/firmware-emulation.md).
-        let _ = (fw.within_2_percent_s, lib.within_2_percent_s);
+        // The step settles into +-2 % of the setpoint within 0.5 s (the controller's own
+        // acceptance on the same plant model, `pressure_regulation.rs`; it settles in
+        // 0.14 / 0.24 s there).
+        let t2 = fw
+            .within_2_percent_s
+            .expect("the binary settles within 2 %");
+        assert!(t2 <= 0.5, "within 2 % only after {t2:.3} s");
         let sp = f64::from(setpoint);
         // Same controller, same plant: the binary's step matches the library's. Tolerances:
         // the two runs draw different sensor and ADC noise (0.02 kPa rms per reading), and

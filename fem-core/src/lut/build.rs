@@ -97,7 +97,9 @@ where
         let start = Instant::now();
         let result = solver(&params)
             .map_err(|e| e.to_string())
-            .and_then(|curve| LutCurve::from_curve(index, &params, &curve));
+            .and_then(|curve| {
+                LutCurve::from_curve(index, &params, &curve).map_err(|e| e.to_string())
+            });
         let seconds = start.elapsed().as_secs_f64();
         let curve = match result {
             Ok(c) => c,

@@ -65,3 +65,56 @@ pub enum LutError {
         grid: String,
     },
 }
+
+/// Why a table's content, or a solver's curve offered to it, breaks the table's invariants.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum TableDefect {
+    /// The grid definition itself is unusable.
+    #[error("{0}")]
+    Grid(String),
+    /// The stored curves are not exactly the grid's (or the shard's) indices, in order.
+    #[error("the table holds curves {holds} but its grid{shard} needs {needs}")]
+    CurveIndices {
+        holds: String,
+        needs: String,
+        /// " (shard K/N)" or empty.
+        shard: String,
+    },
+    #[error("curve {curve} has columns of different lengths")]
+    ColumnLengths { curve: usize },
+    #[error("failed curve {curve} holds data")]
+    FailedCurveHoldsData { curve: usize },
+    /// A per-curve scalar (volumes, inflation displacement) is NaN or infinite.
+    #[error("curve {curve}: {field} = {value} is not finite")]
+    NonFiniteScalar {
+        curve: usize,
+        field: &'static str,
+        value: f64,
+    },
+    /// A column value is NaN or infinite.
+    #[error("curve {curve} step {step}: {column} = {value} is not a finite number")]
+    NonFiniteValue {
+        curve: usize,
+        step: usize,
+        column: &'static str,
+        value: f64,
+    },
+    #[error("curve {curve} step {step}: a_mm = {value} is negative")]
+    NegativeRadius {
+        curve: usize,
+        step: usize,
+        value: f64,
+    },
+    #[error("curve {curve} step {step}: h_mm does not increase ({value} after {previous})")]
+    DepthNotIncreasing {
+        curve: usize,
+        step: usize,
+        value: f64,
+        previous: f64,
+    },
+    /// The solver answered other parameters than those requested.
+    #[error("solver returned a curve for different parameters: {0}")]
+    WrongParameters(String),
+    #[error("only {0} load step(s) returned")]
+    TooFewSteps(usize),
+}

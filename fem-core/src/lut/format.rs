@@ -144,9 +144,9 @@ pub fn sha256_hex(bytes: &[u8]) -> String {
 
 /// Serialise a table; returns the file bytes and the content hash.
 pub fn write_lut_bytes(lut: &Lut) -> Result<(Vec<u8>, String), LutError> {
-    lut.validate().map_err(|reason| LutError::Format {
+    lut.validate().map_err(|defect| LutError::Format {
         source_name: "(table being written)".into(),
-        reason,
+        reason: defect.to_string(),
     })?;
     let header = LutHeader::of(lut);
     let json = serde_json::to_string(&header).map_err(|e| LutError::Format {
@@ -351,7 +351,8 @@ pub fn read_lut_bytes(bytes: &[u8], source_name: &str) -> Result<LutFile, LutErr
         shard: header.shard,
         curves,
     };
-    lut.validate().map_err(fmt_err)?;
+    lut.validate()
+        .map_err(|defect| fmt_err(defect.to_string()))?;
     Ok(LutFile {
         lut,
         header,

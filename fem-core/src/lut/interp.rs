@@ -102,7 +102,18 @@ pub struct LutSlice<'a> {
     lut: &'a Lut,
     ln_modulus: Vec<f64>,
     /// `curves[p][e]`: the prepared curve or why it is unusable, with its grid index.
-    curves: Vec<Vec<(usize, Result<PreparedCurve, String>)>>,
+    curves: Vec<Vec<(usize, Result<PreparedCurve, UnusableCurve>)>>,
+}
+
+/// Why a grid point's curve cannot take part in interpolation.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum UnusableCurve {
+    #[error("not in this table (a shard?)")]
+    NotInTable,
+    #[error("its solve failed: {0}")]
+    SolveFailed(String),
+    #[error("u_s never increases along it")]
+    DisplacementNeverIncreases,
 }
 
 impl Lut {
@@ -139,12 +150,10 @@ impl Lut {
         })
     }
 
-    fn prepare(&self, index: usize) -> Result<PreparedCurve, String> {
-        let c = self
-            .curve(index)
-            .ok_or_else(|| "not in this table (a shard?)".to_string())?;
+    fn prepare(&self, index: usize) -> Result<PreparedCurve, UnusableCurve> {
+        let c = self.curve(index).ok_or(UnusableCurve::NotInTable)?;
         if let Some(f) = &c.failure {
-            return Err(format!("its solve failed: {f}"));
+            return Err(UnusableCurve::SolveFailed(f.clone()));
         }
         let mut keep = Vec::with_capacity(c.len());
         for k in 0..c.len() {
@@ -156,7 +165,7 @@ impl Lut {
             }
         }
         if keep.len() < 2 {
-            return Err("u_s never increases along it".into());
+            return Err(UnusableCurve::DisplacementNeverIncreases);
         }
         let pick = |v: &[f64]| keep.iter().map(|&k| v[k]).collect::<Vec<f64>>();
         Ok(PreparedCurve {
@@ -262,7 +271,7 @@ impl LutSlice<'_> {
                 let c = c.as_ref().map_err(|reason| LutError::CurveUnavailable {
                     index: *index,
                     what: self.describe(*index),
-                    reason: reason.clone(),
+                    reason: reason.to_string(),
                 })?;
                 let (a, b) = c.range();
                 lo = lo.max(a);
@@ -369,7 +378,7 @@ impl LutSlice<'_> {
                 let c = c.as_ref().map_err(|reason| LutError::CurveUnavailable {
                     index: *index,
                     what: self.describe(*index),
-                    reason: reason.clone(),
+                    reason: reason.to_string(),
                 })?;
                 let (a, b) = c.range();
                 lo = lo.max(a);

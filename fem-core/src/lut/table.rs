@@ -1,7 +1,7 @@
 //! The in-memory lookup table: one [`LutCurve`] per grid point (or per grid point of one
 //! shard), in grid order, and the merge of shards into a full table.
 
-use super::error::LutError;
+use super::error::{LutError, TableDefect};
 use super::grid::{LutGrid, Shard};
 use crate::curve::{Curve, CurveParams};
 
@@ -30,23 +30,25 @@ impl LutCurve {
         index: usize,
         requested: &CurveParams,
         curve: &Curve,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, TableDefect> {
         if &curve.params != requested {
-            return Err(format!(
-                "solver returned a curve for different parameters: {:?}",
-                curve.params
-            ));
+            return Err(TableDefect::WrongParameters(format!("{:?}", curve.params)));
         }
         if curve.points.len() < 2 {
-            return Err(format!("only {} load step(s) returned", curve.points.len()));
+            return Err(TableDefect::TooFewSteps(curve.points.len()));
         }
-        let scalars = [
-            curve.rest_volume_mm3,
-            curve.inflated_volume_mm3,
-            curve.inflation_apex_mm,
-        ];
-        if scalars.iter().any(|v| !v.is_finite()) {
-            return Err("non-finite volume or inflation displacement".into());
+        for (field, value) in [
+            ("rest_volume_mm3", curve.rest_volume_mm3),
+            ("inflated_volume_mm3", curve.inflated_volume_mm3),
+            ("inflation_apex_mm", curve.inflation_apex_mm),
+        ] {
+            if !value.is_finite() {
+                return Err(TableDefect::NonFiniteScalar {
+                    curve: index,
+                    field,
+                    value,
+                });
+            }
         }
         let mut c = Self {
             index,
@@ -61,12 +63,29 @@ impl LutCurve {
             volume_mm3: Vec::with_capacity(curve.points.len()),
         };
         for (k, p) in curve.points.iter().enumerate() {
-            let v = [p.h_mm, p.u_s_mm, p.a_mm, p.load_n, p.volume_mm3];
-            if v.iter().any(|x| !x.is_finite()) {
-                return Err(format!("non-finite value at step {k} (h = {} mm)", p.h_mm));
+            for (column, value) in [
+                ("h_mm", p.h_mm),
+                ("u_s_mm", p.u_s_mm),
+                ("a_mm", p.a_mm),
+                ("load_n", p.load_n),
+                ("volume_mm3", p.volume_mm3),
+            ] {
+                if !value.is_finite() {
+                    return Err(TableDefect::NonFiniteValue {
+                        curve: index,
+                        step: k,
+                        column,
+                        value,
+                    });
+                }
             }
             if k > 0 && p.h_mm <= curve.points[k - 1].h_mm {
-                return Err(format!("h does not increase at step {k}"));
+                return Err(TableDefect::DepthNotIncreasing {
+                    curve: index,
+                    step: k,
+                    value: p.h_mm,
+                    previous: curve.points[k - 1].h_mm,
+                });
             }
             c.h_mm.push(p.h_mm);
             c.u_s_mm.push(p.u_s_mm);
@@ -155,21 +174,23 @@ impl Lut {
 
     /// Check the structural invariants: valid grid, curves sorted, each index of the grid
     /// (or shard) exactly once, equal-length columns.
-    pub fn validate(&self) -> Result<(), String> {
-        self.grid.validate().map_err(|e| e.to_string())?;
+    pub fn validate(&self) -> Result<(), TableDefect> {
+        self.grid
+            .validate()
+            .map_err(|e| TableDefect::Grid(e.to_string()))?;
         let expected: Vec<usize> = (0..self.grid.curve_count())
             .filter(|&i| self.shard.is_none_or(|s| s.contains(i)))
             .collect();
         let got: Vec<usize> = self.curves.iter().map(|c| c.index).collect();
         if got != expected {
-            return Err(format!(
-                "the table holds curves {} but its grid{} needs {}",
-                summarise(&got),
-                self.shard
+            return Err(TableDefect::CurveIndices {
+                holds: summarise(&got),
+                needs: summarise(&expected),
+                shard: self
+                    .shard
                     .map(|s| format!(" (shard {s})"))
                     .unwrap_or_default(),
-                summarise(&expected)
-            ));
+            });
         }
         for c in &self.curves {
             let n = c.h_mm.len();
@@ -180,22 +201,23 @@ impl Lut {
                 c.volume_mm3.len(),
             ];
             if lens.iter().any(|&l| l != n) {
-                return Err(format!(
-                    "curve {} has columns of different lengths",
-                    c.index
-                ));
+                return Err(TableDefect::ColumnLengths { curve: c.index });
             }
             if c.failure.is_some() && n != 0 {
-                return Err(format!("failed curve {} holds data", c.index));
+                return Err(TableDefect::FailedCurveHoldsData { curve: c.index });
             }
             if c.failure.is_none() {
-                for (name, v) in [
+                for (field, value) in [
                     ("rest_volume_mm3", c.rest_volume_mm3),
                     ("inflated_volume_mm3", c.inflated_volume_mm3),
                     ("inflation_apex_mm", c.inflation_apex_mm),
                 ] {
-                    if !v.is_finite() {
-                        return Err(format!("curve {}: {name} = {v} is not finite", c.index));
+                    if !value.is_finite() {
+                        return Err(TableDefect::NonFiniteScalar {
+                            curve: c.index,
+                            field,
+                            value,
+                        });
                     }
                 }
             }
@@ -206,28 +228,30 @@ impl Lut {
                 ("load_n", &c.load_n),
                 ("volume_mm3", &c.volume_mm3),
             ];
-            for (name, column) in columns {
-                if let Some(k) = column.iter().position(|v| !v.is_finite()) {
-                    return Err(format!(
-                        "curve {} step {k}: {name} = {} is not a finite number",
-                        c.index, column[k]
-                    ));
+            for (column, values) in columns {
+                if let Some(k) = values.iter().position(|v| !v.is_finite()) {
+                    return Err(TableDefect::NonFiniteValue {
+                        curve: c.index,
+                        step: k,
+                        column,
+                        value: values[k],
+                    });
                 }
             }
             if let Some(k) = c.a_mm.iter().position(|&a| a < 0.0) {
-                return Err(format!(
-                    "curve {} step {k}: a_mm = {} is negative",
-                    c.index, c.a_mm[k]
-                ));
+                return Err(TableDefect::NegativeRadius {
+                    curve: c.index,
+                    step: k,
+                    value: c.a_mm[k],
+                });
             }
             if let Some(k) = c.h_mm.windows(2).position(|w| w[1] < w[0]) {
-                return Err(format!(
-                    "curve {} step {}: h_mm decreases ({} after {})",
-                    c.index,
-                    k + 1,
-                    c.h_mm[k + 1],
-                    c.h_mm[k]
-                ));
+                return Err(TableDefect::DepthNotIncreasing {
+                    curve: c.index,
+                    step: k + 1,
+                    value: c.h_mm[k + 1],
+                    previous: c.h_mm[k],
+                });
             }
         }
         Ok(())
@@ -323,6 +347,8 @@ pub fn merge_shards(shards: &[(String, Lut)]) -> Result<Lut, LutError> {
         shard: None,
         curves,
     };
-    merged.validate().map_err(LutError::Merge)?;
+    merged
+        .validate()
+        .map_err(|defect| LutError::Merge(defect.to_string()))?;
     Ok(merged)
 }

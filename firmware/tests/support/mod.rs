@@ -1,12 +1,11 @@
-//! Test bench for the controller: the pneumatic plant, a deterministic manometer with ADC
-//! noise, an optional HX711, and helpers to send requests and run time forward.
+//! Test bench for the controller: the pneumatic plant (the emulated bench's own model,
+//! `pneumatic-plant`), a deterministic manometer with ADC noise, an optional HX711, and
+//! helpers to send requests and run time forward.
 #![allow(dead_code)]
-
-pub mod plant;
 
 use controller::device_constants::manometer_counts;
 use controller::{Controller, ControllerConfig, Outputs, RawInputs, TICK_PERIOD_US};
-use plant::PneumaticPlant;
+use pneumatic_plant::{PneumaticDrive, Pneumatics, PneumaticsConfig};
 use protocol::{DeviceMessage, Reply, Request, RequestFrame};
 
 /// Peak-to-peak noise of the oversampled manometer counts (±4 counts = ±0.004 kPa: the sum of
@@ -23,9 +22,12 @@ pub enum ManometerFault {
     Fixed(u16),
 }
 
+/// The shell's inner volume at rest (hil-sim's default shell: about 0.47 mL).
+pub const SHELL_VOLUME_MM3: f64 = 470.0;
+
 pub struct Bench {
     pub ctl: Controller,
-    pub plant: PneumaticPlant,
+    pub plant: Pneumatics,
     pub now_us: u64,
     pub last: Outputs,
     pub seq: u16,
@@ -51,7 +53,7 @@ impl Bench {
     pub fn with_config(config: ControllerConfig) -> Self {
         Self {
             ctl: Controller::new(config),
-            plant: PneumaticPlant::default(),
+            plant: Pneumatics::new(PneumaticsConfig::default(), SHELL_VOLUME_MM3, 0.0),
             now_us: 0,
             last: Outputs::default(),
             seq: 0,
@@ -101,7 +103,7 @@ impl Bench {
     pub fn manometer_input(&mut self) -> u16 {
         match self.manometer_fault {
             ManometerFault::None => {
-                let clean = i32::from(manometer_counts(self.plant.pressure_kpa as f32));
+                let clean = i32::from(manometer_counts(self.plant.gauge_kpa() as f32));
                 (clean + self.noise()).clamp(0, 65535) as u16
             }
             ManometerFault::Stuck(c) | ManometerFault::Fixed(c) => c,
@@ -129,9 +131,12 @@ impl Bench {
         };
         let out = self.ctl.tick(self.now_us, &inputs);
         self.plant.step(
-            f64::from(out.pump_duty_per_10k) / 10_000.0,
-            out.vent_open,
             f64::from(TICK_PERIOD_US) * 1e-6,
+            &PneumaticDrive {
+                pump_duty: f64::from(out.pump_duty_per_10k) / 10_000.0,
+                vent_open: out.vent_open,
+                ..PneumaticDrive::default()
+            },
         );
         while let Some(msg) = self.ctl.poll_outgoing() {
             self.outgoing.push(msg);
@@ -145,7 +150,7 @@ impl Bench {
         let end = self.now_us + ms * 1000;
         while self.now_us < end {
             let out = self.tick();
-            observe(self.now_us, self.plant.pressure_kpa, &out);
+            observe(self.now_us, self.plant.gauge_kpa(), &out);
         }
     }
 

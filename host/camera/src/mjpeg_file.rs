@@ -26,17 +26,32 @@ fn be16(bytes: &[u8], at: usize) -> Option<usize> {
     ])))
 }
 
+/// Why the JPEG starting at byte `start` of a stream cannot be delimited.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum JpegSpanError {
+    #[error("JPEG starting at byte {start} is truncated (no EOI)")]
+    Truncated { start: usize },
+    #[error("JPEG starting at byte {start}: expected a marker at byte {at}")]
+    MarkerExpected { start: usize, at: usize },
+    #[error("JPEG starting at byte {start}: new SOI at byte {at} before EOI")]
+    SoiBeforeEoi { start: usize, at: usize },
+    #[error("JPEG starting at byte {start}: segment length {length} at byte {at}")]
+    SegmentLength {
+        start: usize,
+        at: usize,
+        length: usize,
+    },
+}
+
 /// Finds the JPEG starting at `start` (which holds FF D8). Errors carry the byte offset.
-pub fn jpeg_span_at(bytes: &[u8], start: usize) -> Result<JpegSpan, String> {
-    let truncated = || format!("JPEG starting at byte {start} is truncated (no EOI)");
+pub fn jpeg_span_at(bytes: &[u8], start: usize) -> Result<JpegSpan, JpegSpanError> {
+    let truncated = || JpegSpanError::Truncated { start };
     let mut pos = start + 2;
     let (mut width, mut height) = (0, 0);
     loop {
         // A marker: one or more 0xFF fill bytes, then the code.
         if bytes.get(pos) != Some(&0xFF) {
-            return Err(format!(
-                "JPEG starting at byte {start}: expected a marker at byte {pos}"
-            ));
+            return Err(JpegSpanError::MarkerExpected { start, at: pos });
         }
         while bytes.get(pos) == Some(&0xFF) {
             pos += 1;
@@ -54,18 +69,17 @@ pub fn jpeg_span_at(bytes: &[u8], start: usize) -> Result<JpegSpan, String> {
             }
             0xD0..=0xD7 | 0x01 => continue,
             0xD8 => {
-                return Err(format!(
-                    "JPEG starting at byte {start}: new SOI at byte {} before EOI",
-                    pos - 2
-                ));
+                return Err(JpegSpanError::SoiBeforeEoi { start, at: pos - 2 });
             }
             _ => {}
         }
         let len = be16(bytes, pos).ok_or_else(truncated)?;
         if len < 2 {
-            return Err(format!(
-                "JPEG starting at byte {start}: segment length {len} at byte {pos}"
-            ));
+            return Err(JpegSpanError::SegmentLength {
+                start,
+                at: pos,
+                length: len,
+            });
         }
         let is_sof = matches!(code, 0xC0..=0xCF) && !matches!(code, 0xC4 | 0xC8 | 0xCC);
         if is_sof {
@@ -96,7 +110,7 @@ pub fn jpeg_span_at(bytes: &[u8], start: usize) -> Result<JpegSpan, String> {
 }
 
 /// Splits a whole MJPEG stream into JPEG spans; bytes outside images are ignored.
-pub fn split_mjpeg(bytes: &[u8]) -> Result<Vec<JpegSpan>, String> {
+pub fn split_mjpeg(bytes: &[u8]) -> Result<Vec<JpegSpan>, JpegSpanError> {
     let mut spans = Vec::new();
     let mut pos = 0;
     while let Some(off) = bytes
@@ -132,9 +146,9 @@ impl MjpegFileSource {
                     path: path.to_path_buf(),
                     source,
                 })?;
-        let spans = split_mjpeg(&bytes).map_err(|message| CameraError::BadFile {
+        let spans = split_mjpeg(&bytes).map_err(|e| CameraError::BadFile {
             path: path.to_path_buf(),
-            message,
+            message: e.to_string(),
         })?;
         if spans.is_empty() {
             return Err(CameraError::BadFile {

@@ -188,10 +188,13 @@ fn mjpeg_stream_splits_on_markers_and_decodes_to_luma() {
     // A truncated last image is an error that says where it starts.
     let cut = &stream[..spans[2].start + 1000];
     let e = split_mjpeg(cut).unwrap_err();
-    assert!(
-        e.contains("truncated") && e.contains(&spans[2].start.to_string()),
-        "{e}"
+    assert_eq!(
+        e,
+        camera::mjpeg_file::JpegSpanError::Truncated {
+            start: spans[2].start
+        }
     );
+    assert!(e.to_string().contains("truncated"), "{e}");
 }
 
 #[test]

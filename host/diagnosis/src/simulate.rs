@@ -163,12 +163,31 @@ impl std::fmt::Debug for Truth {
     }
 }
 
+/// Why a scenario's truth mechanics could not be built.
+#[derive(Debug, thiserror::Error)]
+pub enum TruthError {
+    #[error(transparent)]
+    Mechanics(#[from] hil_sim::mechanics_source::MechanicsSourceError),
+    #[error(
+        "fem-core solve at E2 = {modulus_kpa:.4} kPa, p_air = {pressure_kpa} kPa failed: {source}"
+    )]
+    Solve {
+        modulus_kpa: f64,
+        pressure_kpa: f64,
+        #[source]
+        source: fem_core::FemError,
+    },
+    #[error(transparent)]
+    Curves(#[from] hil_sim::mechanics::MechanicsError),
+    #[error("the viscoelastic truth needs curves at several moduli")]
+    ViscoelasticNeedsModulusAxis,
+}
+
 /// The truth mechanics of a scenario (the expensive part: fem-core solves, each kept up to
 /// its last converged step, [`fem_core::solve_curve_partial`]).
-pub fn truth_mechanics(scenario: &Scenario) -> Result<Truth, String> {
+pub fn truth_mechanics(scenario: &Scenario) -> Result<Truth, TruthError> {
     if !matches!(scenario.mechanics, MechanicsSource::Solve { .. }) {
-        let mechanics =
-            hil_sim::mechanics_source::build_mechanics(scenario).map_err(|e| e.to_string())?;
+        let mechanics = hil_sim::mechanics_source::build_mechanics(scenario)?;
         return Ok(Truth {
             mechanics,
             reached_travel_mm: f64::INFINITY,
@@ -177,18 +196,18 @@ pub fn truth_mechanics(scenario: &Scenario) -> Result<Truth, String> {
     let mut curves = Vec::new();
     let mut reached = f64::INFINITY;
     for params in hil_sim::mechanics_source::solve_params(scenario) {
-        let (curve, _stop) = fem_core::solve_curve_partial(&params).map_err(|e| {
-            format!(
-                "fem-core solve at E2 = {:.4} kPa, p_air = {} kPa failed: {e}",
-                params.sample_modulus_kpa, params.pressure_kpa
-            )
-        })?;
+        let (curve, _stop) =
+            fem_core::solve_curve_partial(&params).map_err(|source| TruthError::Solve {
+                modulus_kpa: params.sample_modulus_kpa,
+                pressure_kpa: params.pressure_kpa,
+                source,
+            })?;
         reached = reached.min(curve.points.last().map_or(0.0, |q| q.h_mm));
         curves.push(curve);
     }
-    let mechanics = hil_sim::mechanics::CurveMechanics::new(&curves).map_err(|e| e.to_string())?;
+    let mechanics = hil_sim::mechanics::CurveMechanics::new(&curves)?;
     if scenario.effects.needs_modulus_axis() && !mechanics.has_modulus_axis() {
-        return Err("the viscoelastic truth needs curves at several moduli".into());
+        return Err(TruthError::ViscoelasticNeedsModulusAxis);
     }
     Ok(Truth {
         mechanics: Box::new(mechanics),
@@ -268,7 +287,7 @@ pub fn simulate_with(spec: &SimSpec, scenario: &Scenario, truth: &Truth) -> Vec<
 }
 
 /// Builds the truth and simulates (one call).
-pub fn simulate(spec: &SimSpec) -> Result<Vec<Point>, String> {
+pub fn simulate(spec: &SimSpec) -> Result<Vec<Point>, TruthError> {
     let scenario = truth_scenario(spec);
     let truth = truth_mechanics(&scenario)?;
     Ok(simulate_with(spec, &scenario, &truth))

@@ -300,8 +300,9 @@ pub fn sub_table(lut: &Lut, sel: &EffectSelection) -> Result<Lut, TableError> {
         shard: None,
         curves,
     };
-    out.validate()
-        .map_err(|reason| TableError::Invalid { reason })?;
+    out.validate().map_err(|defect| TableError::Invalid {
+        reason: defect.to_string(),
+    })?;
     Ok(out)
 }
 

@@ -10,6 +10,10 @@ use controller::{Controller, ControllerConfig, Outputs, RawInputs, TICK_PERIOD_U
 use protocol::{FrameDecoder, MAX_FRAME_LEN, RequestFrame};
 
 use link::{Transport, TransportError};
+use pneumatic_plant::{PneumaticDrive, Pneumatics, PneumaticsConfig};
+
+/// The shell's inner volume at rest (hil-sim's default shell: about 0.47 mL).
+const SHELL_VOLUME_MM3: f64 = 470.0;
 
 /// The physics behind the controller's inputs.
 pub trait LoopbackPlant: Send {
@@ -17,15 +21,13 @@ pub trait LoopbackPlant: Send {
     fn inputs(&mut self, now_us: u64, dt_s: f64, outputs: &Outputs) -> RawInputs;
 }
 
-/// A simple bench: first-order pneumatics (pressure -> pump_gain * duty with time constant
-/// tau, vent drains it), a rigid sample `contact_at_mm` below the stage zero (apex
+/// A simple bench: the sensor's pneumatic plant (`pneumatic-plant`, as on the emulated
+/// bench), a rigid sample `contact_at_mm` below the stage zero (apex
 /// displacement u_s = max(0, stage - contact)), the proximity parabola
 /// U = A u_s^2 + B u_s + C, and a load cell proportional to u_s; seeded noise.
 #[derive(Debug, Clone)]
 pub struct SimpleBench {
-    pub pressure_kpa: f64,
-    pub pump_gain_kpa: f64,
-    pub tau_s: f64,
+    pub pneumatics: Pneumatics,
     pub contact_at_mm: f64,
     pub parabola_v: [f64; 3],
     pub stiffness_n_per_mm: f64,
@@ -37,9 +39,7 @@ pub struct SimpleBench {
 impl SimpleBench {
     pub fn new(seed: u64) -> Self {
         Self {
-            pressure_kpa: 0.0,
-            pump_gain_kpa: 30.0,
-            tau_s: 0.08,
+            pneumatics: Pneumatics::new(PneumaticsConfig::default(), SHELL_VOLUME_MM3, 0.0),
             contact_at_mm: 1.0,
             parabola_v: [-0.12, -0.55, 2.4],
             stiffness_n_per_mm: 2.0,
@@ -66,19 +66,20 @@ impl SimpleBench {
 
 impl LoopbackPlant for SimpleBench {
     fn inputs(&mut self, now_us: u64, dt_s: f64, outputs: &Outputs) -> RawInputs {
-        let duty = f64::from(outputs.pump_duty_per_10k) / 10_000.0;
-        let target = if outputs.vent_open {
-            0.0
-        } else {
-            self.pump_gain_kpa * duty
-        };
-        self.pressure_kpa += (target - self.pressure_kpa) * (dt_s / self.tau_s).min(1.0);
+        self.pneumatics.step(
+            dt_s,
+            &PneumaticDrive {
+                pump_duty: f64::from(outputs.pump_duty_per_10k) / 10_000.0,
+                vent_open: outputs.vent_open,
+                ..PneumaticDrive::default()
+            },
+        );
         let u = self.u_s_mm(outputs.stage.steps);
         let [a, b, c] = self.parabola_v;
         let volts = a * u * u + b * u + c;
         let proximity_counts = (volts / 3.3 * 65535.0 + 3.0 * self.noise()).clamp(0.0, 65535.0);
         let manometer = f64::from(controller::device_constants::manometer_counts(
-            self.pressure_kpa as f32,
+            self.pneumatics.gauge_kpa() as f32,
         )) + 3.0 * self.noise();
         let load_period_us = 1_000_000 / u64::from(controller::device_constants::LOAD_RATE_SPS);
         let load_counts = if now_us >= self.load_phase_us + load_period_us {
