@@ -19,15 +19,14 @@
 #![allow(clippy::needless_range_loop)]
 
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
-use faer::linalg::solvers::Solve;
 use faer::sparse::linalg::SupernodalThreshold;
 use faer::sparse::linalg::cholesky::{
     CholeskySymbolicParams, LdltRef, LltRef, SymbolicCholesky, SymmetricOrdering,
     factorize_symbolic_cholesky,
 };
-use faer::sparse::linalg::solvers::{Lu, SymbolicLu};
-use faer::sparse::{Argsort, Pair, SparseColMat, SymbolicSparseColMat};
-use faer::{Conj, Mat, Par, Side};
+use faer::sparse::linalg::lu::{LuRef, NumericLu, SymbolicLu, factorize_symbolic_lu};
+use faer::sparse::{Argsort, Pair, SparseColMat, SparseColMatRef, SymbolicSparseColMat};
+use faer::{Conj, Mat, MatMut, Par, Side};
 
 use crate::FemError;
 
@@ -83,8 +82,8 @@ enum NumericFactor {
     Llt,
     /// LDL^T in `CachedStructure::factor`.
     Ldlt,
-    /// Pivoting LU of the full matrix.
-    Lu(Box<Lu<usize, f64>>),
+    /// Pivoting LU of the full matrix (its symbolic part is `CachedStructure::full`).
+    Lu(Box<NumericLu<usize, f64>>),
 }
 
 /// Solver for K x = b with symbolic-factorisation reuse.
@@ -198,13 +197,52 @@ fn full_structure(
         }
         let (sym, argsort) = SymbolicSparseColMat::try_new_from_indices(n, n, &pairs)
             .map_err(|e| solver_error("full pattern", e))?;
-        let lu = SymbolicLu::try_new(sym.as_ref()).map_err(|e| solver_error("symbolic LU", e))?;
+        let lu = factorize_symbolic_lu(sym.as_ref(), Default::default())
+            .map_err(|e| solver_error("symbolic LU", e))?;
         cache.full = Some((sym, argsort, lu));
     }
     cache
         .full
         .as_ref()
         .ok_or_else(|| FemError::LinearSolver("no LU structure".into()))
+}
+
+/// Pivoting sparse LU of `m` (whose pattern is that of `symbolic`), sequential: the linear
+/// algebra never reads faer's process-global parallelism setting.
+fn factor_lu(
+    symbolic: &SymbolicLu<usize>,
+    m: SparseColMatRef<'_, usize, f64>,
+) -> Result<NumericLu<usize, f64>, FemError> {
+    let mut numeric = NumericLu::new();
+    let req = symbolic.factorize_numeric_lu_scratch::<f64>(Par::Seq, Default::default());
+    let mut work = MemBuffer::try_new(req).map_err(|e| solver_error("LU work space", e))?;
+    symbolic
+        .factorize_numeric_lu(
+            &mut numeric,
+            m,
+            Par::Seq,
+            MemStack::new(&mut work),
+            Default::default(),
+        )
+        .map_err(|e| solver_error("sparse LU", e))?;
+    Ok(numeric)
+}
+
+/// Solves in place with the LU factors of [`factor_lu`] (sequential).
+fn solve_lu(
+    symbolic: &SymbolicLu<usize>,
+    numeric: &NumericLu<usize, f64>,
+    x: MatMut<'_, f64>,
+) -> Result<(), FemError> {
+    let req = symbolic.solve_in_place_scratch::<f64>(x.ncols(), Par::Seq);
+    let mut work = MemBuffer::try_new(req).map_err(|e| solver_error("LU work space", e))?;
+    LuRef::new_unchecked(symbolic, numeric).solve_in_place_with_conj(
+        Conj::No,
+        x,
+        Par::Seq,
+        MemStack::new(&mut work),
+    );
+    Ok(())
 }
 
 impl SymmetricSolver {
@@ -348,10 +386,9 @@ impl SymmetricSolver {
             full_values[k] += v;
         }
         let m = SparseColMat::new(sym.clone(), full_values);
-        let lu = Lu::try_new_with_symbolic(symbolic_lu.clone(), m.as_ref())
-            .map_err(|e| solver_error("sparse LU", e))?;
+        let lu = factor_lu(symbolic_lu, m.as_ref())?;
         let mut x = Mat::<f64>::from_fn(n, 1, |i, _| rhs[i]);
-        lu.solve_in_place(x.as_mut());
+        solve_lu(symbolic_lu, &lu, x.as_mut())?;
         let out: Vec<f64> = (0..n).map(|i| x[(i, 0)]).collect();
         if out.iter().any(|v| !v.is_finite()) {
             return Err(FemError::LinearSolver(
@@ -447,10 +484,9 @@ impl SymmetricSolver {
             }
             let m = SparseColMat::new_from_argsort(sym.clone(), argsort, &expanded)
                 .map_err(|e| solver_error("full matrix", e))?;
-            let lu = Lu::try_new_with_symbolic(lu.clone(), m.as_ref())
-                .map_err(|e| solver_error("sparse LU", e))?;
-            lu.solve_in_place(x.as_mut());
-            cache.last = Some(NumericFactor::Lu(Box::new(lu)));
+            let numeric = factor_lu(lu, m.as_ref())?;
+            solve_lu(lu, &numeric, x.as_mut())?;
+            cache.last = Some(NumericFactor::Lu(Box::new(numeric)));
         }
         let out: Vec<f64> = (0..n).map(|i| x[(i, 0)]).collect();
         if out.iter().any(|v| !v.is_finite()) {
@@ -500,7 +536,10 @@ impl SymmetricSolver {
                     stack,
                 );
             }
-            NumericFactor::Lu(lu) => lu.solve_in_place(x.as_mut()),
+            NumericFactor::Lu(numeric) => {
+                let (_, _, symbolic) = cache.full.as_ref()?;
+                solve_lu(symbolic, numeric, x.as_mut()).ok()?;
+            }
         }
         let out: Vec<f64> = (0..n).map(|i| x[(i, 0)]).collect();
         out.iter().all(|v| v.is_finite()).then_some(out)

@@ -776,7 +776,6 @@ fn solve_stages(
     tune: &dyn Fn(&mut NewtonSettings),
 ) -> Result<Stages, FemError> {
     validate(params)?;
-    faer::set_global_parallelism(faer::Par::Seq);
     let started = Instant::now();
 
     // stage 1: inflation of the shell alone

@@ -1,0 +1,102 @@
+#!/usr/bin/env bash
+# Regenerates the measured blocks of docs/results.md: every section of that page has a
+# block between `<!-- results: NAME -->` and `<!-- /results -->` that holds what its
+# commands print (their own summary lines, without cargo's and libtest's bookkeeping). The
+# prose around the blocks says what is measured and how to read it; the numbers are in the
+# blocks only, so rerunning this script brings the whole page up to date.
+#
+#   scripts/results.sh --list          # the sections and their commands
+#   scripts/results.sh                 # every section (release builds; about an hour on 2 cores)
+#   scripts/results.sh NAME...         # only these sections
+#
+# A section whose command fails keeps its previous block and is reported; the script then
+# exits non-zero. Timings in the blocks depend on the machine and its load: compare ratios.
+set -uo pipefail
+cd "$(dirname "$0")/.."
+
+page=docs/results.md
+
+# name|command (run by bash from the repository root). Order = order of the page.
+sections=(
+    "demo|for e in 25 60 120 200; do cargo run -q --release -p tactile -- demo --modulus \$e --pressure 6 --seed 3; done; for e in 350 600 1000; do cargo run -q --release -p tactile -- demo --modulus \$e --pressure 15 --seed 3; done"
+    "bench-measure|cargo test -q -p tactile --release --test cli_calibrate -- --nocapture && cargo test -q --release -p system-tests --test measure_sim_bench -- --ignored --nocapture"
+    "fit|cargo test -q -p fit --release --test fit_lut -- --nocapture"
+    "vision|cargo test -q -p vision --release --test contact_radius -- --ignored --nocapture && cargo run -q --release -p tactile --example vision_timing"
+    "pressure|cargo test -q -p controller --release --test pressure_regulation -- --nocapture --test-threads=1 && cargo run -q --release -p hil-sim --example pressure_steps"
+    "emulated-bench|cargo test -q -p hil-sim --release --test device_behaviour -- --nocapture --test-threads=1 && cargo test -q -p hil-sim --release --test clock_alignment -- --nocapture"
+    "daemon|cargo test -q --release -p system-tests --test daemon_experiments -- --nocapture --test-threads=1"
+    "fem-verification|cargo test -q -p fem-core --release -- --include-ignored --nocapture --test-threads=1"
+    "convergence|RAYON_NUM_THREADS=1 cargo run -q --release -p fem-core --example convergence_study -- 1e7 6 1,2,4,8 0"
+    "fem-speed|RAYON_NUM_THREADS=1 cargo run -q --release -p fem-core --example solver_trace -- 200 6 0"
+    "diagnosis|cargo test -q --release -p system-tests --test diagnose_hidden_effects -- --ignored --nocapture && cargo test -q --release -p system-tests --test diagnose_null -- --ignored --nocapture && cargo test -q --release -p system-tests --test diagnose_table_error -- --ignored --nocapture"
+    "firmware-size|(cd firmware/rp2040 && cargo build -q --release) && scripts/check-firmware-size.sh"
+)
+
+name_of() { printf '%s' "${1%%|*}"; }
+command_of() { printf '%s' "${1#*|}"; }
+
+if [ "${1:-}" = "--list" ]; then
+    for s in "${sections[@]}"; do
+        printf '%-18s %s\n' "$(name_of "$s")" "$(command_of "$s")"
+    done
+    exit 0
+fi
+
+wanted=("$@")
+for w in "${wanted[@]}"; do
+    found=0
+    for s in "${sections[@]}"; do [ "$(name_of "$s")" = "$w" ] && found=1; done
+    if [ "$found" -eq 0 ]; then
+        echo "unknown section '$w' (scripts/results.sh --list shows them)" >&2
+        exit 2
+    fi
+done
+
+# Lines that are cargo's or the test harness's, not a measurement.
+noise='^(running [0-9]+ tests?|test result:|test [^ ]+ \.\.\. |[.]+$|[.]*(ok|ignored)$|successes:|failures:|---- |$|[[:space:]]+(Compiling|Finished|Running|Doc-tests|Blocking|Downloaded|Updating)|warning:|note: )'
+
+failed=()
+for s in "${sections[@]}"; do
+    name=$(name_of "$s")
+    if [ "${#wanted[@]}" -gt 0 ] && ! printf '%s\n' "${wanted[@]}" | grep -qx "$name"; then
+        continue
+    fi
+    if ! grep -q "^<!-- results: $name -->$" "$page"; then
+        echo "$page has no block for '$name'" >&2
+        failed+=("$name")
+        continue
+    fi
+    cmd=$(command_of "$s")
+    printf '==> %s: %s\n' "$name" "$cmd" >&2
+    out=$(mktemp)
+    start=$(date +%s)
+    if bash -c "$cmd" >"$out" 2>&1; then
+        secs=$(( $(date +%s) - start ))
+        body=$(mktemp)
+        {
+            echo '```text'
+            # -q prints a dot per passed test, glued to the next printed line.
+            sed -E 's/^\.+//' "$out" | grep -Ev "$noise" | sed -E 's/[[:space:]]+$//'
+            echo '```'
+        } >"$body"
+        # Replace the block's content, keep everything else of the page.
+        awk -v name="$name" -v body="$body" '
+            $0 == "<!-- results: " name " -->" { print; while ((getline line < body) > 0) print line; skip = 1; next }
+            skip && $0 == "<!-- /results -->" { skip = 0 }
+            !skip { print }
+        ' "$page" >"$page.new" && mv "$page.new" "$page"
+        rm -f "$body"
+        printf '    %s: %d s\n' "$name" "$secs" >&2
+    else
+        echo "    $name FAILED (block kept); its output:" >&2
+        tail -n 30 "$out" >&2
+        failed+=("$name")
+    fi
+    rm -f "$out"
+done
+
+if [ "${#failed[@]}" -gt 0 ]; then
+    echo "failed: ${failed[*]}" >&2
+    exit 1
+fi
+echo "docs/results.md regenerated" >&2
