@@ -201,7 +201,8 @@ async function run(browser) {
     await page.click('#record-list li a');
     await page.waitForSelector('#record-detail img');
     await sleep(500);
-    await page.screenshot({ path: SCREENSHOT, fullPage: true });
+    await page.evaluate(() => window.scrollTo(0, 0));
+    await page.screenshot({ path: SCREENSHOT });
     console.log(`# screenshot: ${SCREENSHOT}`);
   }
   // The record with its plots and files.
@@ -233,10 +234,18 @@ async function run(browser) {
     const j = await apiGet(`/v1/experiments/${stopId}`);
     return j.state !== 'running' && j.state !== 'queued' && j;
   }, JOB_MS);
-  const st = await until('status after the stop', async () => {
-    const s = await apiGet('/v1/status');
-    return s.vent_open !== null && s;
-  }, CONNECT_MS);
+  // The status report is refreshed by the device thread's next poll after the link is
+  // reopened: wait for it (about 0.1-0.5 s unloaded), then read the vent and the setpoint.
+  let st = null;
+  try {
+    st = await until('vent open and pressure off in the status', async () => {
+      st = await apiGet('/v1/status');
+      return st.connected && st.vent_open === true && st.setpoint_kpa === 0 && st;
+    }, CONNECT_MS);
+  } catch (e) {
+    console.log(`# ${e.message}: ${JSON.stringify(st && { connected: st.connected, vent_open: st.vent_open, setpoint_kpa: st.setpoint_kpa })}`);
+  }
+  st = st || { vent_open: null, emergency_stops: null };
   check('the stop button stops: acknowledged, vent open, job partial',
     outcome === 'acknowledged' && st.vent_open === true && stopped.state === 'partial'
       && st.emergency_stops === stopsBefore + 1,

@@ -110,7 +110,7 @@ function plot(canvas, series, opts) {
   const ctx = canvas.getContext('2d');
   ctx.setTransform(ratio, 0, 0, ratio, 0, 0);
   ctx.clearRect(0, 0, w, h);
-  const L = 48, R = 10, T = 8, B = 28;
+  const L = 58, R = 10, T = 8, B = 28;
   const xs = [], ys = [];
   for (const s of series) for (const p of s.data) { xs.push(p[0]); ys.push(p[1]); }
   const [x0, x1] = opts.x || range(xs, 0, null);
@@ -127,10 +127,19 @@ function plot(canvas, series, opts) {
   ctx.textAlign = 'center'; ctx.textBaseline = 'top';
   for (const t of niceTicks(x0, x1, 6)) {
     ctx.beginPath(); ctx.moveTo(X(t), T); ctx.lineTo(X(t), h - B); ctx.stroke();
-    ctx.fillText(+(opts.xLabelOf ? opts.xLabelOf(t) : t).toPrecision(6) + '', X(t), h - B + 3);
+    ctx.fillText(+t.toPrecision(6) + '', X(t), h - B + 3);
+  }
+  ctx.textAlign = 'right';
+  ctx.fillText(opts.xLabel || '', w - R, h - 13);
+  if (opts.yLabel) {
+    ctx.save();
+    ctx.translate(2, T + (h - T - B) / 2);
+    ctx.rotate(-Math.PI / 2);
+    ctx.textAlign = 'center'; ctx.textBaseline = 'top';
+    ctx.fillText(opts.yLabel, 0, 0);
+    ctx.restore();
   }
   ctx.textAlign = 'left';
-  ctx.fillText(opts.xLabel || '', L, h - 12);
   let legendX = L + 6;
   for (const s of series) {
     ctx.strokeStyle = s.color; ctx.fillStyle = s.color; ctx.lineWidth = s.width || 1.5;
@@ -138,11 +147,13 @@ function plot(canvas, series, opts) {
       for (const p of s.data) ctx.fillRect(X(p[0]) - 1.5, Y(p[1]) - 1.5, 3, 3);
     } else {
       ctx.beginPath();
-      let pen = false;
+      let pen = false, last = -Infinity;
       for (const p of s.data) {
         if (p[1] === null || p[1] === undefined) { pen = false; continue; }
+        // A gap in the data (the stream paused) is left open, not bridged by a line.
+        if (opts.maxGap && p[0] - last > opts.maxGap) pen = false;
         if (pen) ctx.lineTo(X(p[0]), Y(p[1])); else ctx.moveTo(X(p[0]), Y(p[1]));
-        pen = true;
+        pen = true; last = p[0];
       }
       ctx.stroke();
     }
@@ -159,22 +170,22 @@ function draw() {
   rafPending = false;
   state.draws++;
   const tr = state.trace;
+  // Time axis relative to the newest sample (device time).
   const now = tr.length ? tr[tr.length - 1][0] : 0;
-  const xr = [now - WINDOW_S, now];
-  const rel = (t) => t - now;
+  const xr = [-WINDOW_S, 0];
   plot($('plot-pressure'), [
-    { data: tr.map((r) => [r[0], r[1]]), color: '#1565c0', label: 'pressure kPa' },
-    { data: tr.map((r) => [r[0], r[2]]), color: '#e65100', label: 'setpoint kPa', width: 1 },
-  ], { x: xr, xLabel: 's', xLabelOf: rel, yMin: [0, 1] });
+    { data: tr.map((r) => [r[0] - now, r[1]]), color: '#1565c0', label: 'pressure' },
+    { data: tr.map((r) => [r[0] - now, r[2]]), color: '#e65100', label: 'setpoint', width: 1 },
+  ], { x: xr, xLabel: 'time (s)', yLabel: 'kPa', yMin: [0, 1], maxGap: 0.1 });
   plot($('plot-stage'), [
-    { data: tr.map((r) => [r[0], r[3]]), color: '#2e7d32', label: 'stage mm' },
-    { data: tr.map((r) => [r[0], r[4]]), color: '#6a1b9a', label: 'load N', width: 1 },
-  ], { x: xr, xLabel: 's', xLabelOf: rel });
+    { data: tr.map((r) => [r[0] - now, r[3]]), color: '#2e7d32', label: 'stage (mm)' },
+    { data: tr.map((r) => [r[0] - now, r[4]]), color: '#6a1b9a', label: 'load (N)', width: 1 },
+  ], { x: xr, xLabel: 'time (s)', maxGap: 0.1 });
   const pts = state.points.filter((p) => p[1] > 0);
   plot($('plot-curve'), [
     { data: pts.map((p) => [p[0], p[1]]), color: '#1565c0', dots: true, label: 'measured' },
     { data: state.model, color: '#c62828', width: 2, label: 'model at the estimate' },
-  ], { xLabel: 'u_s (mm)   a (mm) upwards', yMin: [0, 0.5] });
+  ], { xLabel: 'u_s (mm)', yLabel: 'a (mm)', yMin: [0, 0.5] });
   $('points-count').textContent = String(state.points.length);
 }
 
@@ -193,12 +204,21 @@ function showFit() {
   $('fit-state').dataset.final = state.finalFit ? 'true' : 'false';
 }
 
+// While an experiment runs the daemon does not poll the device's status (the job owns the
+// link): its setpoint is the experiment's pressure.
+function currentSetpoint() {
+  for (const j of state.jobs.values()) {
+    if (j.state === 'running' && j.experiment) return j.experiment.pressure_kpa;
+  }
+  return state.setpoint;
+}
+
 const handlers = {
   sample(e) {
     const t = e.device_time_us * 1e-6;
     const tr = state.trace;
     if (tr.length && t < tr[tr.length - 1][0]) tr.length = 0; // the device restarted
-    tr.push([t, e.pressure_kpa, state.setpoint, e.stage_mm, e.load_n]);
+    tr.push([t, e.pressure_kpa, currentSetpoint(), e.stage_mm, e.load_n]);
     let k = 0;
     while (k < tr.length && t - tr[k][0] > WINDOW_S) k++;
     if (k > 64) tr.splice(0, k);
@@ -292,7 +312,7 @@ async function refreshStatus() {
   state.setpoint = s.setpoint_kpa;
   showLink(s.connected, s.port);
   showFaults(s.faults);
-  $('v-setpoint').textContent = fmt(s.setpoint_kpa, 2);
+  $('v-setpoint').textContent = fmt(currentSetpoint(), 2);
   $('v-vent').textContent = s.vent_open === null ? '–' : (s.vent_open ? 'open' : 'closed');
   $('v-pump').textContent = s.pump_duty === null ? '–' : `${(s.pump_duty * 100).toFixed(0)} %`;
   $('v-port').textContent = s.port || '–';
@@ -318,7 +338,7 @@ function showJobs() {
     li.dataset.state = j.state;
     let text = `#${j.id} ${j.kind} ${j.state}`;
     if (j.state === 'running') text += ` ${(j.progress * 100).toFixed(0)} %`;
-    if (j.fit) text += ` — E2 ${j.fit.modulus_kpa.toFixed(1)} kPa (${j.fit.ci95_kpa[0].toFixed(1)} .. ${j.fit.ci95_kpa[1].toFixed(1)})`;
+    if (j.fit && !(j.message || '').includes('E2')) text += ` — E2 ${j.fit.modulus_kpa.toFixed(1)} kPa (${j.fit.ci95_kpa[0].toFixed(1)} .. ${j.fit.ci95_kpa[1].toFixed(1)})`;
     if (j.message) text += ` — ${j.message}`;
     li.textContent = text;
     if (j.state === 'running' || j.state === 'queued') {
@@ -450,7 +470,8 @@ $('experiment-form').addEventListener('submit', async (ev) => {
   if (r.ok) {
     $('form-result').textContent = `queued as job ${r.data.id}`;
     $('form-result').dataset.job = String(r.data.id);
-    state.jobs.set(r.data.id, r.data);
+    // The job may already have started (and its feed event arrived): keep the newer state.
+    if (!state.jobs.has(r.data.id)) state.jobs.set(r.data.id, r.data);
     showJobs();
     return;
   }
