@@ -116,10 +116,10 @@ async function run(browser) {
   // --- login ------------------------------------------------------------------------
   const redirects = [];
   page.on('response', (r) => { if (r.status() === 303) redirects.push(r.headers()['location']); });
-  const landed = await page.goto(daemon.login);
+  const arrived = await page.goto(daemon.login);
   check('login address answers 303 to the clean address', redirects.length === 1 && redirects[0] === '/',
     `redirects ${JSON.stringify(redirects)}`);
-  check('the page is at / without the token', page.url() === `${base}/` && landed.status() === 200, page.url());
+  check('the page is at / without the token', page.url() === `${base}/` && arrived.status() === 200, page.url());
   const cookies = await browser.cookies(base);
   const session = cookies.find((c) => c.name.startsWith('tactile_session_'));
   check('session cookie is HttpOnly and SameSite=Strict', session && session.httpOnly && session.sameSite === 'Strict',
