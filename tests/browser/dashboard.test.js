@@ -224,6 +224,19 @@ async function run(browser) {
     const pts = Number(await page.textContent('#points-count'));
     return j.state === 'running' && pts > 10;
   }, JOB_MS);
+  // A third one waits in the queue; its Cancel button takes it out.
+  await page.fill('input[name=label]', 'to be cancelled');
+  await page.click('#submit-experiment');
+  const queuedId = Number(await until('third experiment queued', async () => {
+    const id = await page.getAttribute('#form-result', 'data-job');
+    return Number(id) > stopId && id;
+  }, UI_MS));
+  await page.click(`#jobs li[data-job="${queuedId}"] button.cancel`);
+  const cancelled = await until('queued job cancelled', async () => {
+    const j = await apiGet(`/v1/experiments/${queuedId}`);
+    return j.state !== 'queued' && j;
+  }, UI_MS);
+  check('a queued job is cancelled from the page', cancelled.state === 'cancelled', cancelled.state);
   const stopsBefore = (await apiGet('/v1/status')).emergency_stops;
   const tStop = Date.now();
   await page.click('#estop');

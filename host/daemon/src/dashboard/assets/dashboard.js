@@ -29,7 +29,28 @@ const state = {
 
 // ---- requests ----------------------------------------------------------------------
 
-async function api(method, path, body) {
+// The browser opens at most 6 connections to one host (HTTP/1.1) and queues the rest. The
+// feed holds one; the page's other requests go through this limiter (2 at a time, record
+// plots load one after another), so a connection is always free for the stop, which does
+// not use it.
+const MAX_IN_FLIGHT = 2;
+let inFlight = 0;
+const waiting = [];
+async function limited(fn) {
+  if (inFlight >= MAX_IN_FLIGHT) await new Promise((r) => waiting.push(r));
+  inFlight++;
+  try { return await fn(); } finally {
+    inFlight--;
+    const next = waiting.shift();
+    if (next) next();
+  }
+}
+
+function api(method, path, body) {
+  return limited(() => request(method, path, body));
+}
+
+async function request(method, path, body) {
   const init = { method, cache: 'no-store', headers: {} };
   if (method !== 'GET') init.headers['X-Tactile-CSRF'] = CSRF;
   if (body !== undefined) {
@@ -388,8 +409,12 @@ async function showRecord(name) {
   }
   for (const file of files.filter((f) => f.endsWith('.svg'))) {
     const img = document.createElement('img');
-    img.alt = file; img.src = `/v1/records/${encodeURIComponent(name)}/${encodeURIComponent(file)}`;
+    img.alt = file;
     box.appendChild(img);
+    await limited(() => new Promise((done) => {
+      img.onload = done; img.onerror = done;
+      img.src = `/v1/records/${encodeURIComponent(name)}/${encodeURIComponent(file)}`;
+    }));
   }
   const ul = document.createElement('ul');
   ul.className = 'list';
