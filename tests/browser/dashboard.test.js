@@ -193,10 +193,17 @@ async function run(browser) {
   const maxEvents = Math.max(...perf.events);
   const drawRates = perf.draws.filter((d) => d > 0);
   const medianDraws = drawRates.sort((a, b) => a - b)[Math.floor(drawRates.length / 2)] || 0;
-  // 100 sample events/s (2 kHz decimated by the daemon) + 60 frames/s + points: the page
-  // must keep drawing (at least 10 redraws/s while events arrive, on a loaded machine).
-  check('the page keeps up with the 2 kHz stream and 60 frames/s', maxEvents >= 100 && medianDraws >= 10,
-    `up to ${maxEvents} events/s, median ${medianDraws} draws/s`);
+  const lagged = Number(await page.textContent('#v-lagged'));
+  const shown = Number(await page.textContent('#points-count'));
+  const kept = (await apiGet('/v1/live')).points.length;
+  // Keeping up: the daemon dropped no event for the page (it would send `lagged`), every
+  // paired point reached the plot, and the page redrew at least 5 times a second (it
+  // draws once per animation frame while events arrive: 20-60/s unloaded; 5/s still
+  // follows the run within 0.2 s on a starved machine). The event rate is reported: about
+  // 100 sample events/s (2 kHz decimated by the daemon) + 60 frames/s + points unloaded,
+  // less when the simulated bench itself falls behind the wall clock.
+  check('the page keeps up with the 2 kHz stream and 60 frames/s', lagged === 0 && shown === kept && medianDraws >= 5,
+    `up to ${maxEvents} events/s, median ${medianDraws} draws/s, ${lagged} events lagged, ${shown} of ${kept} points shown`);
   if (SCREENSHOT) {
     await page.click('#record-list li a');
     await page.waitForSelector('#record-detail img');
@@ -275,8 +282,17 @@ async function run(browser) {
   await fpage.goto(`http://127.0.0.1:${fport}/`);
   const jobsBefore = (await apiGet('/v1/experiments')).length;
   const stopsBefore2 = (await apiGet('/v1/status')).emergency_stops;
-  const attempts = await fpage.evaluate(async (daemonBase) => {
+  const recordName = (await apiGet('/v1/records'))[0].name;
+  const attempts = await fpage.evaluate(async ([daemonBase, record]) => {
     const out = {};
+    // An image of the daemon's embedded in another site's page: the cookie is sent, but
+    // the browser marks the request same-site, not same-origin.
+    out.image = await new Promise((done) => {
+      const img = new Image();
+      img.onload = () => done('loaded');
+      img.onerror = () => done('refused');
+      img.src = `${daemonBase}/v1/records/${record}/a_us.svg`;
+    });
     // A "simple" request: no preflight, the browser sends the cookie (same site: only the
     // port differs) and its own Origin.
     try {
@@ -296,7 +312,7 @@ async function run(browser) {
       out.read = `read ${r.status}`;
     } catch (e) { out.read = 'blocked'; }
     return out;
-  }, base);
+  }, [base, recordName]);
   const formNav = fpage.waitForNavigation();
   await fpage.evaluate((daemonBase) => {
     const f = document.createElement('form');
@@ -309,7 +325,8 @@ async function run(browser) {
   await sleep(500);
   const jobsAfter = (await apiGet('/v1/experiments')).length;
   const stopsAfter = (await apiGet('/v1/status')).emergency_stops;
-  check('a page on another port cannot stop, queue or read', attempts.cors === 'blocked' && attempts.read === 'blocked'
+  check('a page on another port cannot stop, queue, read or embed', attempts.cors === 'blocked' && attempts.read === 'blocked'
+    && attempts.image === 'refused'
     && formResponse && formResponse.status() === 403 && jobsAfter === jobsBefore && stopsAfter === stopsBefore2,
     `${JSON.stringify(attempts)}, form ${formResponse && formResponse.status()}, jobs ${jobsBefore}->${jobsAfter}, stops ${stopsBefore2}->${stopsAfter}`);
   await fpage.close();

@@ -188,6 +188,37 @@ fn login_cookie_csrf_and_assets() {
     assert_eq!(r.status, 200, "{}", r.body);
     assert!(r.body.contains("\"points\""), "{}", r.body);
 
+    // What another site embeds or fetches (the browser says so in Sec-Fetch-Site) gets
+    // nothing with the cookie, not even a read.
+    for site in ["same-site", "cross-site"] {
+        let r = request(
+            &addr,
+            "GET",
+            "/v1/status",
+            &[("Cookie", &cookie), ("Sec-Fetch-Site", site)],
+            "",
+        );
+        assert_eq!(r.status, 403, "{site}: {}", r.body);
+    }
+    let r = request(
+        &addr,
+        "GET",
+        "/",
+        &[("Cookie", &cookie), ("Sec-Fetch-Site", "none")],
+        "",
+    );
+    assert_eq!(r.status, 200, "an address the user opened");
+    // A link from another site to the page: shown as not logged in (no CSRF token).
+    let r = request(
+        &addr,
+        "GET",
+        "/",
+        &[("Cookie", &cookie), ("Sec-Fetch-Site", "same-site")],
+        "",
+    );
+    assert_eq!(r.status, 401);
+    assert!(!r.body.contains("tactile-csrf"));
+
     // A change with the cookie alone, or with a foreign Origin, or without the CSRF token,
     // or without an Origin: refused, and nothing changes.
     let own_origin = format!("http://{addr}");

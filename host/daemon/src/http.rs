@@ -169,6 +169,21 @@ async fn guard(State(app): State<App>, mut req: Request, next: Next) -> Response
     }
     let by = if authorized(headers, &app.access.token) {
         AuthorizedBy::Bearer
+    } else if app.access.dashboard.has_session(headers)
+        && !app.access.dashboard.fetch_site_ok(headers)
+    {
+        // A browser says where a request comes from (Sec-Fetch-Site): the cookie counts
+        // only for the dashboard's own pages and for what the user opened directly, not
+        // for an image, script or feed another site embeds, nor for a link from another
+        // site (browsers count another port of 127.0.0.1 as the same site and send the
+        // cookie there too): such a request is treated as one without the cookie.
+        if !is_public(req.uri().path()) {
+            return error(
+                StatusCode::FORBIDDEN,
+                "the dashboard's session cookie is accepted only from the dashboard's own pages",
+            );
+        }
+        AuthorizedBy::Public
     } else if app.access.dashboard.has_session(headers) {
         let safe = matches!(*req.method(), Method::GET | Method::HEAD);
         // A change made with the cookie needs the page's own Origin (checked above) and the

@@ -16,12 +16,13 @@
 
 pub mod session;
 
+use axum::Extension;
 use axum::Json;
 use axum::extract::{Path, RawQuery, State};
-use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
+use axum::http::{HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 
-use super::http::{App, error};
+use super::http::{App, AuthorizedBy, error};
 
 const INDEX_HTML: &str = include_str!("assets/index.html");
 const LOGIN_HTML: &str = include_str!("assets/login.html");
@@ -66,7 +67,7 @@ fn login_param(query: Option<&str>) -> Option<&str> {
 pub async fn page(
     State(app): State<App>,
     RawQuery(query): RawQuery,
-    headers: HeaderMap,
+    Extension(by): Extension<AuthorizedBy>,
 ) -> Response {
     let auth = &app.access.dashboard;
     if let Some(login) = login_param(query.as_deref()) {
@@ -96,7 +97,8 @@ pub async fn page(
         )
             .into_response();
     }
-    if auth.has_session(&headers) {
+    // The guard decided whether the cookie counts (or the bearer token was sent).
+    if by != AuthorizedBy::Public {
         return (
             StatusCode::OK,
             page_headers("text/html; charset=utf-8"),

@@ -16,6 +16,9 @@
 //!   header naming the daemon and `X-Tactile-CSRF` with that token. A foreign page, even
 //!   one on another port of 127.0.0.1 (which browsers count as the same site and so send
 //!   the cookie to), gets neither past the checks.
+//! - A browser marks where each request comes from (`Sec-Fetch-Site`): the cookie counts
+//!   only for `same-origin` and `none` (what the user opened), so another site cannot even
+//!   embed the daemon's plots or open its feed with it.
 
 use std::sync::Mutex;
 
@@ -111,6 +114,17 @@ impl DashboardAuth {
             .any(|(name, value)| name == self.cookie_name && tokens_equal(value, &self.session))
     }
 
+    /// `Sec-Fetch-Site` is absent (not a browser, or an old one) or says the request comes
+    /// from the daemon's own origin (`same-origin`) or from the user (`none`: an address
+    /// typed or bookmarked).
+    pub fn fetch_site_ok(&self, headers: &HeaderMap) -> bool {
+        match headers.get("sec-fetch-site").map(|h| h.to_str()) {
+            None => true,
+            Some(Ok(v)) => v.eq_ignore_ascii_case("same-origin") || v.eq_ignore_ascii_case("none"),
+            Some(Err(_)) => false,
+        }
+    }
+
     /// The CSRF token the page sends with every change.
     pub fn csrf(&self) -> &str {
         &self.csrf
@@ -173,5 +187,15 @@ mod tests {
         h.insert(CSRF_HEADER, HeaderValue::from_str(a.csrf()).unwrap());
         assert!(a.csrf_ok(&h));
         assert!(!b.csrf_ok(&h));
+        assert!(a.fetch_site_ok(&h));
+        for (site, ok) in [
+            ("same-origin", true),
+            ("none", true),
+            ("same-site", false),
+            ("cross-site", false),
+        ] {
+            h.insert("sec-fetch-site", HeaderValue::from_static(site));
+            assert_eq!(a.fetch_site_ok(&h), ok, "{site}");
+        }
     }
 }
