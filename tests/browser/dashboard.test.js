@@ -4,13 +4,13 @@
 // first), follows the live points and the final E2, presses the stop button in the middle
 // of a second run and checks through the JSON API that the vent opened and the job ended
 // partial; a page on another port cannot change anything; the page reconnects by itself
-// after the daemon restarts.
+// after the daemon restarts, shows the fault the new bench latches and clears it.
 //
 // Usage: node dashboard.test.js --tactile PATH [--screenshot FILE]
 // Prints one line per check and `N passed, M failed` last; exits 1 on any failure.
 
 import { spawn } from 'node:child_process';
-import { mkdtempSync, readFileSync, rmSync } from 'node:fs';
+import { mkdtempSync, readFileSync, rmSync, writeFileSync } from 'node:fs';
 import { createServer } from 'node:http';
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
@@ -42,10 +42,10 @@ const tokenFile = join(dir, 'token');
 let daemon = null;
 let daemonLog = '';
 
-function startDaemon(listen) {
+function startDaemon(listen, extra = []) {
   return new Promise((resolve, reject) => {
     const child = spawn(TACTILE, ['daemon', '--sim', '--listen', listen, '--records', join(dir, 'records'),
-      '--token-file', tokenFile], { stdio: ['ignore', 'ignore', 'pipe'] });
+      '--token-file', tokenFile, ...extra], { stdio: ['ignore', 'ignore', 'pipe'] });
     let text = '';
     const timer = setTimeout(() => reject(new Error(`daemon did not print its addresses:\n${text}`)), CONNECT_MS);
     child.stderr.on('data', (d) => {
@@ -333,15 +333,29 @@ async function run(browser) {
   foreign.close();
 
   // --- the daemon restarts -----------------------------------------------------------
+  // The new simulated bench has a pressure spike (30 kPa over the 20 kPa limit for 50 ms)
+  // 3 s after it starts: the controller latches OVERPRESSURE and vents; the cause is gone
+  // at once, so the fault can be cleared.
+  const scenario = join(dir, 'overpressure.toml');
+  writeFileSync(scenario, 'name = "overpressure"\n[faults]\noverpressure = { at_s = 3.0, rise_kpa = 30.0, duration_s = 0.05 }\n');
   const addr = daemon.addr;
   const tDown = Date.now();
   await stopDaemon(daemon.child);
   await page.waitForSelector('body[data-feed="down"]');
-  daemon = await startDaemon(addr);
+  daemon = await startDaemon(addr, ['--scenario', scenario]);
   await page.waitForSelector('body[data-feed="live"]', { timeout: CONNECT_MS });
   await until('page shows the device again', async () =>
     (await page.textContent('#link-state')).startsWith('device: /'), CONNECT_MS);
   check('the page reconnects after a daemon restart without a new login', true, `${Date.now() - tDown} ms`);
+
+  // --- the fault banner ----------------------------------------------------------------
+  await page.waitForSelector('#fault-banner:not([hidden])', { timeout: CONNECT_MS });
+  const faultText = await page.textContent('#fault-names');
+  await page.click('#clear-fault');
+  await page.waitForSelector('#fault-banner', { state: 'hidden', timeout: CONNECT_MS });
+  const faultsAfter = (await apiGet('/v1/status')).faults;
+  check('the fault banner shows the latched fault and Clear fault clears it',
+    faultText.includes('OVERPRESSURE') && faultsAfter.length === 0, `${faultText}; after: ${JSON.stringify(faultsAfter)}`);
 
   check('no script errors in the page', pageErrors.length === 0, pageErrors.slice(0, 3).join(' | '));
 }
