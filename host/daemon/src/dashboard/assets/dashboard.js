@@ -24,6 +24,7 @@ const state = {
   jobs: new Map(),
   events: 0,
   draws: 0,
+  frames: 0,
   lagged: 0,
 };
 
@@ -37,12 +38,12 @@ const MAX_IN_FLIGHT = 2;
 let inFlight = 0;
 const waiting = [];
 async function limited(fn) {
+  // A waiter is handed the finishing request's slot, so at most MAX_IN_FLIGHT run.
   if (inFlight >= MAX_IN_FLIGHT) await new Promise((r) => waiting.push(r));
-  inFlight++;
+  else inFlight++;
   try { return await fn(); } finally {
-    inFlight--;
     const next = waiting.shift();
-    if (next) next();
+    if (next) next(); else inFlight--;
   }
 }
 
@@ -247,6 +248,10 @@ const handlers = {
     $('v-stage').textContent = fmt(e.stage_mm, 4);
     $('v-load').textContent = fmt(e.load_n, 4);
   },
+  frame(e) {
+    state.frames++;
+    $('v-radius').textContent = fmt(e.a_mm, 3);
+  },
   point(e) {
     state.points.push([e.u_s_mm, e.a_mm, e.cycle]);
   },
@@ -325,9 +330,13 @@ function showFaults(latched) {
   $('fault-names').textContent = (latched || []).join(', ');
 }
 
+let statusPending = false;
 async function refreshStatus() {
+  // One status request at a time: a daemon that does not answer does not pile them up.
+  if (statusPending) return;
+  statusPending = true;
   let r;
-  try { r = await api('GET', '/v1/status'); } catch (_) { return; }
+  try { r = await api('GET', '/v1/status'); } catch (_) { return; } finally { statusPending = false; }
   if (!r.ok || !r.data) return;
   const s = r.data;
   state.setpoint = s.setpoint_kpa;
@@ -521,7 +530,8 @@ setInterval(() => {
   $('perf').textContent = `${state.events} events/s, ${state.draws} draws/s`;
   document.body.dataset.eventsPerS = String(state.events);
   document.body.dataset.drawsPerS = String(state.draws);
-  state.events = 0; state.draws = 0;
+  $('v-fps').textContent = state.frames ? `(${state.frames} camera frames/s)` : '';
+  state.events = 0; state.draws = 0; state.frames = 0;
 }, 1000);
 setInterval(refreshStatus, 1000);
 openFeed();
