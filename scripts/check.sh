@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The whole test suite: the repository's text checks, formatting, lints, the no_std checks,
 # every test of the workspace, the RP2040 firmware's release build with its size budget, and
-# that binary in the emulated chip against hil-sim's plant (scripts/firmware-emulation-test.sh).
+# that binary in the emulated chip against hil-sim's plant (scripts/firmware-emulation-test.sh),
+# and the daemon's web dashboard in headless Chromium (scripts/dashboard-browser-test.sh).
 # This is what CI runs.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -39,5 +40,8 @@ if [ -f firmware/rp2040/Cargo.toml ]; then
     step "firmware/rp2040: the release binary in the emulated chip"
     scripts/firmware-emulation-test.sh
 fi
+
+step "the web dashboard in headless Chromium (scripts/dashboard-browser-test.sh)"
+scripts/dashboard-browser-test.sh
 
 printf '\nAll checks passed in %ss.\n' "$(( $(date +%s) - start ))"

@@ -195,6 +195,15 @@ impl Client {
         self.call("DELETE", &format!("/v1/experiments/{id}"), None)
     }
 
+    /// A new one-time login address of the web dashboard.
+    pub fn login_link(&self) -> Result<String, ClientError> {
+        let v: serde_json::Value = self.call("POST", "/v1/login-link", Some(""))?;
+        v.get("url")
+            .and_then(|u| u.as_str())
+            .map(String::from)
+            .ok_or_else(|| ClientError::Decode("/v1/login-link: no url".into()))
+    }
+
     pub fn records(&self) -> Result<serde_json::Value, ClientError> {
         self.call("GET", "/v1/records", None)
     }

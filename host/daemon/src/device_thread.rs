@@ -82,7 +82,7 @@ impl DeviceThread {
         lut: Arc<Lut>,
         lut_info: experiment::pipeline::LutInfo,
     ) -> Result<Self, String> {
-        let fit = FitWorker::start(Arc::clone(&lut), shared.events.clone())
+        let fit = FitWorker::start(Arc::clone(&lut), Arc::clone(&shared.switch))
             .map_err(|e| format!("the fit worker thread: {e}"))?;
         let camera = match (&source, &config.camera) {
             #[cfg(feature = "sim")]

@@ -8,9 +8,8 @@ use std::sync::Arc;
 use fem_core::lut::Lut;
 use std::sync::mpsc::{Receiver, Sender, channel};
 
-use tokio::sync::broadcast;
-
 use super::api::{Event, FitSummary};
+use super::guarded_transport::StopSwitch;
 use fit::{FitOptions, FitPoint, LutModel, ModulusFit, fit_modulus};
 
 /// One request: fit `points`; `reply` gets the result (final fits).
@@ -29,11 +28,11 @@ pub struct FitWorker {
 
 impl FitWorker {
     /// Starts the worker on `lut`.
-    pub fn start(lut: Arc<Lut>, events: broadcast::Sender<Event>) -> std::io::Result<Self> {
+    pub fn start(lut: Arc<Lut>, switch: Arc<StopSwitch>) -> std::io::Result<Self> {
         let (tx, rx) = channel::<FitRequest>();
         std::thread::Builder::new()
             .name("daemon-fit".into())
-            .spawn(move || run(&lut, rx, events))?;
+            .spawn(move || run(&lut, rx, &switch))?;
         Ok(Self { tx })
     }
 
@@ -76,7 +75,7 @@ pub fn load_lut(path: &Path) -> Result<(Arc<Lut>, String), String> {
     Ok((Arc::new(file.lut), file.sha256))
 }
 
-fn run(lut: &Lut, rx: Receiver<FitRequest>, events: broadcast::Sender<Event>) {
+fn run(lut: &Lut, rx: Receiver<FitRequest>, switch: &StopSwitch) {
     let Ok(model) = LutModel::new(lut) else {
         return;
     };
@@ -90,9 +89,11 @@ fn run(lut: &Lut, rx: Receiver<FitRequest>, events: broadcast::Sender<Event>) {
         }
         let result = fit_modulus(&model, &request.points, FitOptions::default());
         if let Ok(fit) = &result {
-            let _ = events.send(Event::Fit {
-                fit: summary(fit),
-                model: model_curve(&model, fit, &request.points),
+            let (fit, model) = (summary(fit), model_curve(&model, fit, &request.points));
+            switch.live.fit(fit, &model, request.final_fit);
+            let _ = switch.events.send(Event::Fit {
+                fit,
+                model,
                 final_fit: request.final_fit,
             });
         }

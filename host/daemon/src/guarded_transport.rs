@@ -83,6 +83,8 @@ pub struct StopSwitch {
     /// Camera frames measured and dropped (set by the running experiment's radius source).
     pub frames_measured: AtomicU64,
     pub frames_dropped: AtomicU64,
+    /// The running experiment's points and fit as published (`GET /v1/live`).
+    pub live: super::live_curve::LiveBoard,
 }
 
 /// What happened to a stop.
@@ -105,6 +107,7 @@ impl StopSwitch {
             frame_errors: AtomicU64::new(0),
             frames_measured: AtomicU64::new(0),
             frames_dropped: AtomicU64::new(0),
+            live: super::live_curve::LiveBoard::default(),
         })
     }
 

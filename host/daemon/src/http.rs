@@ -6,7 +6,10 @@
 //!    must be `http://` + one of those: a web page in the user's browser (DNS rebinding, a
 //!    cross-site form) gets 403;
 //! 2. `Authorization: Bearer <token>` must carry the token from the daemon's 0600 token
-//!    file: otherwise 401;
+//!    file, or the request carries the web dashboard's session cookie, with which a change
+//!    (POST, DELETE) also needs an `Origin` header and the CSRF header
+//!    ([`super::dashboard::session`]; 403 otherwise); without either: 401, except for the
+//!    dashboard's public paths (`/`, `/assets/...`);
 //! 3. bodies are limited to [`MAX_BODY_BYTES`] (413), must be JSON (415), parse (400) and
 //!    validate (422, naming each bad field); nothing changes unless all of that passed.
 
@@ -16,7 +19,7 @@ use std::time::{Duration, Instant};
 
 use axum::extract::rejection::JsonRejection;
 use axum::extract::{DefaultBodyLimit, FromRequest, Path, Request, State};
-use axum::http::{HeaderMap, StatusCode, header};
+use axum::http::{HeaderMap, Method, StatusCode, header};
 use axum::middleware::Next;
 use axum::response::sse::{Event as SseEvent, KeepAlive, Sse};
 use axum::response::{IntoResponse, Response};
@@ -29,17 +32,22 @@ use super::api::{
     ApiError, Event, ExperimentRequest, FieldError, JobKind, MAX_BODY_BYTES, PressureRequest,
     StopReport, VentRequest,
 };
+use super::dashboard::session::DashboardAuth;
 use super::guarded_transport::StopKind;
 use super::listener::{BODY_READ_TIMEOUT, Connection};
 use super::shared::{CancelError, Command, Shared};
 use super::token::tokens_equal;
 
 /// Who may talk to the daemon.
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 pub struct Access {
     pub token: String,
     /// Acceptable `Host` header values (lower case).
     pub hosts: Vec<String>,
+    /// The address the daemon listens on.
+    pub addr: std::net::SocketAddr,
+    /// The web dashboard's login tokens, session cookie and CSRF token.
+    pub dashboard: DashboardAuth,
 }
 
 impl Access {
@@ -53,8 +61,30 @@ impl Access {
             }
         }
         hosts.dedup();
-        Self { token, hosts }
+        let dashboard = DashboardAuth::new(&token, port);
+        Self {
+            token,
+            hosts,
+            addr,
+            dashboard,
+        }
     }
+}
+
+/// How a request was authorised (a request extension set by the guard).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AuthorizedBy {
+    Bearer,
+    /// The dashboard's session cookie (with the CSRF rules for changes).
+    Cookie,
+    /// Nothing: only the dashboard's public paths are reached this way.
+    Public,
+}
+
+/// Paths served without credentials (after the Host and Origin checks): the page (which
+/// itself shows the dashboard only to a logged-in browser) and its script and style.
+fn is_public(path: &str) -> bool {
+    path == "/" || path.starts_with("/assets/")
 }
 
 #[derive(Debug, Clone)]
@@ -117,7 +147,7 @@ where
     }
 }
 
-async fn guard(State(app): State<App>, req: Request, next: Next) -> Response {
+async fn guard(State(app): State<App>, mut req: Request, next: Next) -> Response {
     let headers = req.headers();
     let host = headers
         .get(header::HOST)
@@ -137,7 +167,39 @@ async fn guard(State(app): State<App>, req: Request, next: Next) -> Response {
             return error(StatusCode::FORBIDDEN, "foreign Origin header");
         }
     }
-    if !authorized(headers, &app.access.token) {
+    let by = if authorized(headers, &app.access.token) {
+        AuthorizedBy::Bearer
+    } else if app.access.dashboard.has_session(headers)
+        && !app.access.dashboard.fetch_site_ok(headers)
+    {
+        // A browser says where a request comes from (Sec-Fetch-Site): the cookie counts
+        // only for the dashboard's own pages and for what the user opened directly, not
+        // for an image, script or feed another site embeds, nor for a link from another
+        // site (browsers count another port of 127.0.0.1 as the same site and send the
+        // cookie there too): such a request is treated as one without the cookie.
+        if !is_public(req.uri().path()) {
+            return error(
+                StatusCode::FORBIDDEN,
+                "the dashboard's session cookie is accepted only from the dashboard's own pages",
+            );
+        }
+        AuthorizedBy::Public
+    } else if app.access.dashboard.has_session(headers) {
+        let safe = matches!(*req.method(), Method::GET | Method::HEAD);
+        // A change made with the cookie needs the page's own Origin (checked above) and the
+        // CSRF token the page was given: the cookie alone never authorises it.
+        if !safe
+            && (headers.get(header::ORIGIN).is_none() || !app.access.dashboard.csrf_ok(headers))
+        {
+            return error(
+                StatusCode::FORBIDDEN,
+                "a change made with the dashboard's session cookie needs the page's Origin and X-Tactile-CSRF headers",
+            );
+        }
+        AuthorizedBy::Cookie
+    } else if is_public(req.uri().path()) {
+        AuthorizedBy::Public
+    } else {
         return (
             StatusCode::UNAUTHORIZED,
             [(header::WWW_AUTHENTICATE, "Bearer")],
@@ -147,10 +209,13 @@ async fn guard(State(app): State<App>, req: Request, next: Next) -> Response {
             }),
         )
             .into_response();
-    }
-    if let Some(conn) = req.extensions().get::<Arc<Connection>>() {
+    };
+    if by != AuthorizedBy::Public
+        && let Some(conn) = req.extensions().get::<Arc<Connection>>()
+    {
         conn.authenticate();
     }
+    req.extensions_mut().insert(by);
     next.run(req).await
 }
 
@@ -180,10 +245,29 @@ pub fn router(app: App) -> Router {
         .route("/v1/records/{name}", get(list_record_files))
         .route("/v1/records/{name}/{file}", get(get_record_file))
         .route("/v1/events", get(events))
+        .route("/v1/live", get(super::dashboard::live))
+        .route("/v1/login-link", post(login_link))
+        .route("/", get(super::dashboard::page))
+        .route("/assets/{file}", get(super::dashboard::asset))
         .fallback(|| async { error(StatusCode::NOT_FOUND, "no such endpoint") })
         .layer(axum::middleware::from_fn_with_state(app.clone(), guard))
         .layer(DefaultBodyLimit::max(MAX_BODY_BYTES))
         .with_state(app)
+}
+
+/// `POST /v1/login-link`: a new one-time dashboard login address, for bearer-token
+/// holders only (`tactile dashboard`).
+async fn login_link(
+    State(app): State<App>,
+    axum::Extension(by): axum::Extension<AuthorizedBy>,
+) -> Response {
+    if by != AuthorizedBy::Bearer {
+        return error(
+            StatusCode::FORBIDDEN,
+            "a login address is given only for the bearer token",
+        );
+    }
+    super::dashboard::login_link(State(app)).await
 }
 
 async fn status(State(app): State<App>) -> Response {
@@ -459,6 +543,7 @@ async fn send_file(path: &std::path::Path) -> Response {
         Some("json") => "application/json",
         Some("csv") => "text/csv; charset=utf-8",
         Some("svg") => "image/svg+xml",
+        Some("png") => "image/png",
         _ => "application/octet-stream",
     };
     match tokio::task::spawn_blocking({

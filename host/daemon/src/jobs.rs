@@ -288,9 +288,14 @@ pub fn run_experiment(dt: &mut DeviceThread, link: &mut Link, job: Job) -> Optio
     match outcome {
         Ok(report) => {
             // The final fit on the live feed, as the running fits before it.
+            let (fit, model) = (
+                summary(&report.fit),
+                model_curve(&model, &report.fit, &report.fit_points),
+            );
+            dt.shared.switch.live.fit(fit, &model, true);
             let _ = dt.shared.events.send(Event::Fit {
-                fit: summary(&report.fit),
-                model: model_curve(&model, &report.fit, &report.fit_points),
+                fit,
+                model,
                 final_fit: true,
             });
             dt.shared

@@ -7,6 +7,8 @@
 //! - [`api`]: request/response bodies and live-feed events (shared with the clients);
 //! - [`token`]: the bearer token in a 0600 file;
 //! - [`http`]: routes, Host/Origin/token checks, body limits, the SSE feed;
+//! - [`dashboard`]: the web page at `/`, its login, session cookie and CSRF rules;
+//!   [`live_curve`]: the running experiment's curve for a page that opens mid-run;
 //! - [`guarded_transport`]: the link's transport with the emergency-stop path and the
 //!   live-feed tap;
 //! - [`device_thread`]: the thread that owns the link; [`jobs`]: experiments and
@@ -21,12 +23,14 @@
 
 pub mod api;
 pub mod client;
+pub mod dashboard;
 pub mod device_thread;
 pub mod fit_worker;
 pub mod guarded_transport;
 pub mod http;
 pub mod jobs;
 pub mod listener;
+pub mod live_curve;
 pub mod live_radius;
 pub mod server;
 pub mod shared;

@@ -182,6 +182,7 @@ impl<'a> LiveRadius<'a> {
                 continue;
             };
             let u = u_s - zero;
+            self.switch.live.point(u, f.a_mm, self.track.cycle);
             let _ = self.switch.events.send(Event::Point {
                 u_s_mm: u,
                 a_mm: f.a_mm,

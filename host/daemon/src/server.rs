@@ -61,6 +61,8 @@ pub struct DaemonHandle {
     pub addr: SocketAddr,
     pub token: String,
     pub token_created: bool,
+    /// The web dashboard's one-time login address (printed by `tactile daemon`).
+    pub login_url: String,
     pub shared: Arc<Shared>,
     /// Counters of the accept loop (open, evicted, refused connections).
     pub connections: Arc<ConnectionStats>,
@@ -108,6 +110,8 @@ pub fn start(options: DaemonOptions) -> Result<DaemonHandle, DaemonError> {
     listener
         .set_nonblocking(true)
         .map_err(|source| DaemonError::Bind { addr, source })?;
+    let access = Access::for_addr(addr, token.clone());
+    let login_url = super::dashboard::login_url(addr, &access.dashboard.new_login()?);
     let (lut, lut_sha256) =
         super::fit_worker::load_lut(&options.lut_path).map_err(DaemonError::Start)?;
     let (events, _) = broadcast::channel(4096);
@@ -146,7 +150,7 @@ pub fn start(options: DaemonOptions) -> Result<DaemonHandle, DaemonError> {
         .map_err(|e| DaemonError::Start(e.to_string()))?;
     let app = App {
         shared: Arc::clone(&shared),
-        access: Arc::new(Access::for_addr(addr, token.clone())),
+        access: Arc::new(access),
     };
     let (shutdown_tx, shutdown_rx) = tokio::sync::oneshot::channel::<()>();
     let connections = Arc::new(ConnectionStats::default());
@@ -179,6 +183,7 @@ pub fn start(options: DaemonOptions) -> Result<DaemonHandle, DaemonError> {
         addr,
         token,
         token_created,
+        login_url,
         shared,
         connections,
         #[cfg(feature = "sim")]

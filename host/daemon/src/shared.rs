@@ -217,6 +217,9 @@ impl Shared {
             job.message = "starting".into();
             job.clone()
         };
+        if job.kind == JobKind::Experiment {
+            self.switch.live.start(job.id);
+        }
         let _ = self.events.send(Event::Job { job: job.clone() });
         Some(job)
     }

@@ -78,11 +78,7 @@ pub fn load_or_create_token(path: &Path) -> Result<(String, bool), TokenError> {
             .create(parent)
             .map_err(io(parent))?;
     }
-    let mut bytes = [0u8; 32];
-    std::fs::File::open("/dev/urandom")
-        .and_then(|mut f| f.read_exact(&mut bytes))
-        .map_err(io(Path::new("/dev/urandom")))?;
-    let token: String = bytes.iter().map(|b| format!("{b:02x}")).collect();
+    let token = random_hex()?;
     let mut file = std::fs::OpenOptions::new()
         .write(true)
         .create_new(true)
@@ -92,6 +88,15 @@ pub fn load_or_create_token(path: &Path) -> Result<(String, bool), TokenError> {
     file.write_all(format!("{token}\n").as_bytes())
         .map_err(io(path))?;
     Ok((token, true))
+}
+
+/// 32 random bytes from the kernel, hex-encoded (64 digits).
+pub fn random_hex() -> Result<String, TokenError> {
+    let mut bytes = [0u8; 32];
+    std::fs::File::open("/dev/urandom")
+        .and_then(|mut f| f.read_exact(&mut bytes))
+        .map_err(io(Path::new("/dev/urandom")))?;
+    Ok(bytes.iter().map(|b| format!("{b:02x}")).collect())
 }
 
 /// Compares in time independent of where the strings differ.

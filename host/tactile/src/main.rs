@@ -45,6 +45,8 @@ enum Command {
     Run(cli::run::RunArgs),
     /// Live dashboard of the daemon: pressure, a–u_s curve and fit, stream losses, faults.
     Watch(cli::watch::WatchArgs),
+    /// A new one-time login address of the daemon's web dashboard.
+    Dashboard(cli::dashboard::DashboardArgs),
 }
 
 fn main() -> ExitCode {
@@ -65,5 +67,6 @@ fn main() -> ExitCode {
         Command::Stop(args) => cli::stop::run(args),
         Command::Run(args) => cli::run::run(args),
         Command::Watch(args) => cli::watch::run(args),
+        Command::Dashboard(args) => cli::dashboard::run(args),
     }
 }

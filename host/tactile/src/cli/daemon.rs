@@ -138,6 +138,10 @@ pub fn run(args: DaemonArgs) -> ExitCode {
                 },
                 args.records.display()
             );
+            eprintln!(
+                "dashboard: {} (the address works once; `tactile dashboard` prints a new one)",
+                handle.login_url
+            );
             // SIGTERM / SIGINT: vent and stop the device, close the records, exit.
             let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
             for signal in [signal_hook::consts::SIGTERM, signal_hook::consts::SIGINT] {

@@ -2,6 +2,7 @@
 
 pub mod calibrate;
 pub mod daemon;
+pub mod dashboard;
 pub mod demo;
 pub mod devices;
 pub mod diagnose;
