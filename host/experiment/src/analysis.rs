@@ -46,7 +46,7 @@ pub fn write_curve_and_fit(
     result: &IndentationResult,
     pressure_kpa: f64,
     model: &LutModel,
-) -> Result<(ModulusFit, Vec<FitPoint>, Option<String>), AnalysisError> {
+) -> Result<(ModulusFit, Vec<FitPoint>, Option<fit::plots::PlotError>), AnalysisError> {
     let rows: Vec<CurveRow> = result
         .points
         .iter()
@@ -82,9 +82,7 @@ fn write_plots(
     model: &LutModel,
     points: &[FitPoint],
     fit: &ModulusFit,
-) -> Result<(), String> {
-    fit::plots::write_fit_plots(dir, model, points, fit).map_err(|e| e.to_string())?;
-    fit::plots::write_pressure_trace(dir)
-        .map(|_| ())
-        .map_err(|e| e.to_string())
+) -> Result<(), fit::plots::PlotError> {
+    fit::plots::write_fit_plots(dir, model, points, fit)?;
+    fit::plots::write_pressure_trace(dir).map(|_| ())
 }

@@ -7,7 +7,7 @@
 //! - `residuals`: a - model against u_s;
 //! - `pressure`: the manometer trace of `samples.csv` against time.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use plotters::coord::Shift;
@@ -18,6 +18,8 @@ use crate::{FitPoint, LutModel, ModulusFit};
 const W: u32 = 800;
 const H: u32 = 520;
 const FONT: &str = "sans-serif";
+/// Largest `samples.csv` plotted (a minute at 2 kHz is ~6 MB; the curve files' own limit).
+const MAX_SAMPLES_CSV_BYTES: u64 = 64 << 20;
 
 /// Registers the embedded font once (plotters looks fonts up by family name).
 fn font_ready() -> bool {
@@ -47,6 +49,25 @@ struct XyPlot {
     lines: Vec<Line>,
     /// Markers.
     points: Vec<(f64, f64)>,
+}
+
+/// Why a plot was not written.
+#[derive(Debug, thiserror::Error)]
+pub enum PlotError {
+    #[error("the embedded plot font could not be loaded")]
+    Font,
+    #[error("{path}: drawing failed: {message}")]
+    Draw { path: PathBuf, message: String },
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{path}: PNG encoding failed: {message}")]
+    Encode { path: PathBuf, message: String },
+    #[error("{path}: header lacks host_time_us or manometer_counts")]
+    SamplesHeader { path: PathBuf },
 }
 
 fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, plot: &XyPlot) -> Result<(), String> {
@@ -88,32 +109,45 @@ fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, plot: &XyPlot) -> Res
 }
 
 /// Writes `<dir>/<name>.svg` and `<dir>/<name>.png`.
-fn render(dir: &Path, name: &str, plot: &XyPlot) -> Result<(), String> {
+fn render(dir: &Path, name: &str, plot: &XyPlot) -> Result<(), PlotError> {
     if !font_ready() {
-        return Err("the embedded plot font could not be loaded".into());
+        return Err(PlotError::Font);
     }
     let svg_path = dir.join(format!("{name}.svg"));
     {
         let root = SVGBackend::new(&svg_path, (W, H)).into_drawing_area();
-        draw(&root, plot).map_err(|e| format!("{}: {e}", svg_path.display()))?;
+        draw(&root, plot).map_err(|message| PlotError::Draw {
+            path: svg_path.clone(),
+            message,
+        })?;
     }
     let png_path = dir.join(format!("{name}.png"));
     let mut rgb = vec![0u8; (W * H * 3) as usize];
     {
         let root = BitMapBackend::with_buffer(&mut rgb, (W, H)).into_drawing_area();
-        draw(&root, plot).map_err(|e| format!("{}: {e}", png_path.display()))?;
+        draw(&root, plot).map_err(|message| PlotError::Draw {
+            path: png_path.clone(),
+            message,
+        })?;
     }
-    write_png_rgb(&png_path, W, H, &rgb).map_err(|e| format!("{}: {e}", png_path.display()))
+    write_png_rgb(&png_path, W, H, &rgb)
 }
 
-fn write_png_rgb(path: &Path, w: u32, h: u32, rgb: &[u8]) -> Result<(), String> {
-    let file = std::fs::File::create(path).map_err(|e| e.to_string())?;
+fn write_png_rgb(path: &Path, w: u32, h: u32, rgb: &[u8]) -> Result<(), PlotError> {
+    let file = std::fs::File::create(path).map_err(|source| PlotError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let encode = |e: png::EncodingError| PlotError::Encode {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    };
     let mut enc = png::Encoder::new(std::io::BufWriter::new(file), w, h);
     enc.set_color(png::ColorType::Rgb);
     enc.set_depth(png::BitDepth::Eight);
-    let mut writer = enc.write_header().map_err(|e| e.to_string())?;
-    writer.write_image_data(rgb).map_err(|e| e.to_string())?;
-    writer.finish().map_err(|e| e.to_string())
+    let mut writer = enc.write_header().map_err(encode)?;
+    writer.write_image_data(rgb).map_err(encode)?;
+    writer.finish().map_err(encode)
 }
 
 /// Writes `a_us.{svg,png}` and `residuals.{svg,png}` into `dir`.
@@ -122,7 +156,7 @@ pub fn write_fit_plots(
     model: &LutModel<'_>,
     points: &[FitPoint],
     fit: &ModulusFit,
-) -> Result<(), String> {
+) -> Result<(), PlotError> {
     if points.is_empty() {
         return Ok(());
     }
@@ -192,7 +226,7 @@ pub fn write_fit_plots(
 /// Manometer pressure against time from a record's `samples.csv` (raw counts converted
 /// with the device's nominal transfer function, as `samples.csv` stores them), as
 /// `pressure.{svg,png}`. Returns the (t_s, p_kpa) trace plotted.
-pub fn write_pressure_trace(dir: &Path) -> Result<Vec<(f64, f64)>, String> {
+pub fn write_pressure_trace(dir: &Path) -> Result<Vec<(f64, f64)>, PlotError> {
     let trace = pressure_trace(&dir.join("samples.csv"))?;
     if trace.len() < 2 {
         return Ok(trace);
@@ -225,17 +259,20 @@ fn decimate(v: &[(f64, f64)], n: usize) -> Vec<(f64, f64)> {
 
 /// (t_s from the first sample, manometer kPa) from `samples.csv`: columns `host_time_us`
 /// and `manometer_counts`, p = (counts - 6554) x 9.5367e-4 kPa (controller::device_constants).
-pub fn pressure_trace(samples_csv: &Path) -> Result<Vec<(f64, f64)>, String> {
-    let text = std::fs::read_to_string(samples_csv)
-        .map_err(|e| format!("{}: {e}", samples_csv.display()))?;
+pub fn pressure_trace(samples_csv: &Path) -> Result<Vec<(f64, f64)>, PlotError> {
+    let bytes = fem_core::input_file::read_limited(samples_csv, MAX_SAMPLES_CSV_BYTES, "samples")
+        .map_err(|source| PlotError::Io {
+        path: samples_csv.to_path_buf(),
+        source,
+    })?;
+    let text = String::from_utf8_lossy(&bytes);
     let mut lines = text.lines();
     let header = lines.next().unwrap_or_default();
     let col = |name: &str| header.split(',').position(|c| c == name);
     let (Some(it), Some(ip)) = (col("host_time_us"), col("manometer_counts")) else {
-        return Err(format!(
-            "{}: header lacks host_time_us or manometer_counts",
-            samples_csv.display()
-        ));
+        return Err(PlotError::SamplesHeader {
+            path: samples_csv.to_path_buf(),
+        });
     };
     let mut out = Vec::new();
     let mut t0 = None;
