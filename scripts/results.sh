@@ -16,24 +16,26 @@ cd "$(dirname "$0")/.."
 
 page=docs/results.md
 
-# name|command (run by bash from the repository root). Order = order of the page.
+# name@@lines kept (an extended regular expression; empty: every line)@@command (run by
+# bash from the repository root). Order = order of the page.
 sections=(
-    "demo|for e in 25 60 120 200; do cargo run -q --release -p tactile -- demo --modulus \$e --pressure 6 --seed 3; done; for e in 350 600 1000; do cargo run -q --release -p tactile -- demo --modulus \$e --pressure 15 --seed 3; done"
-    "bench-measure|cargo test -q -p tactile --release --test cli_calibrate -- --nocapture && cargo test -q --release -p system-tests --test measure_sim_bench -- --ignored --nocapture"
-    "fit|cargo test -q -p fit --release --test fit_lut -- --nocapture"
-    "vision|cargo test -q -p vision --release --test contact_radius -- --ignored --nocapture && cargo run -q --release -p tactile --example vision_timing"
-    "pressure|cargo test -q -p controller --release --test pressure_regulation -- --nocapture --test-threads=1 && cargo run -q --release -p hil-sim --example pressure_steps"
-    "emulated-bench|cargo test -q -p hil-sim --release --test device_behaviour -- --nocapture --test-threads=1 && cargo test -q -p hil-sim --release --test clock_alignment -- --nocapture"
-    "daemon|cargo test -q --release -p system-tests --test daemon_experiments -- --nocapture --test-threads=1"
-    "fem-verification|cargo test -q -p fem-core --release -- --include-ignored --nocapture --test-threads=1"
-    "convergence|RAYON_NUM_THREADS=1 cargo run -q --release -p fem-core --example convergence_study -- 1e7 6 1,2,4,8 0"
-    "fem-speed|RAYON_NUM_THREADS=1 cargo run -q --release -p fem-core --example solver_trace -- 200 6 0"
-    "diagnosis|cargo test -q --release -p system-tests --test diagnose_hidden_effects -- --ignored --nocapture && cargo test -q --release -p system-tests --test diagnose_null -- --ignored --nocapture && cargo test -q --release -p system-tests --test diagnose_table_error -- --ignored --nocapture"
-    "firmware-size|(cd firmware/rp2040 && cargo build -q --release) && scripts/check-firmware-size.sh"
+    "demo@@@@for ep in 25:6 60:6 120:6 200:6 350:15 600:15 1000:15; do echo \"true E2 \${ep%:*} kPa at \${ep#*:} kPa:\"; cargo run -q --release -p tactile -- demo --modulus \${ep%:*} --pressure \${ep#*:} --seed 3 2>&1 | grep -E '^(E2 =|simulated sample|error)' | sed 's/^/    /'; done"
+    "bench-measure@@@@cargo test -q -p tactile --release --test cli_calibrate -- --nocapture && cargo test -q --release -p system-tests --test measure_sim_bench -- --ignored --nocapture"
+    "fit@@@@cargo test -q -p fit --release --test fit_lut -- --nocapture"
+    "vision@@@@cargo run -q --release -p tactile --example vision_timing && cargo test -q --release -p system-tests --test vision_near_mirror -- --ignored --nocapture"
+    "pressure@@@@cargo test -q -p controller --release --test pressure_regulation -- --nocapture --test-threads=1 && cargo run -q --release -p hil-sim --example pressure_steps"
+    "emulated-bench@@@@cargo test -q -p hil-sim --release --test device_behaviour -- --nocapture --test-threads=1 && cargo test -q -p hil-sim --release --test clock_alignment -- --nocapture"
+    "daemon@@@@cargo test -q --release -p system-tests --test daemon_experiments -- --nocapture --test-threads=1"
+    "fem-verification@@@@cargo test -q -p fem-core --release -- --include-ignored --nocapture --test-threads=1"
+    "convergence@@@@RAYON_NUM_THREADS=1 cargo run -q --release -p fem-core --example convergence_study -- 1e7 6 1,2,4,8 0"
+    "fem-speed@@^(stage|curve solve)@@RAYON_NUM_THREADS=1 cargo run -q --release -p fem-core --example solver_trace -- 200 6 0"
+    "diagnosis@@^[^ ]@@cargo test -q --release -p system-tests --test diagnose_hidden_effects -- --ignored --nocapture && cargo test -q --release -p system-tests --test diagnose_null -- --ignored --nocapture && cargo test -q --release -p system-tests --test diagnose_table_error -- --ignored --nocapture"
+    "firmware-size@@@@(cd firmware/rp2040 && cargo build -q --release) && scripts/check-firmware-size.sh"
 )
 
-name_of() { printf '%s' "${1%%|*}"; }
-command_of() { printf '%s' "${1#*|}"; }
+name_of() { printf '%s' "${1%%@@*}"; }
+keep_of() { local rest="${1#*@@}"; printf '%s' "${rest%%@@*}"; }
+command_of() { local rest="${1#*@@}"; printf '%s' "${rest#*@@}"; }
 
 if [ "${1:-}" = "--list" ]; then
     for s in "${sections[@]}"; do
@@ -53,7 +55,7 @@ for w in "${wanted[@]}"; do
 done
 
 # Lines that are cargo's or the test harness's, not a measurement.
-noise='^(running [0-9]+ tests?|test result:|test [^ ]+ \.\.\. |[.]+$|[.]*(ok|ignored)$|successes:|failures:|---- |$|[[:space:]]+(Compiling|Finished|Running|Doc-tests|Blocking|Downloaded|Updating)|warning:|note: )'
+noise='^(running [0-9]+ tests?|test result:|test [^ ]+ \.\.\. |[.]+$|[.]*(ok|ignored)$|successes:|failures:|---- |$|[[:space:]]+(Compiling|Finished|Running|Doc-tests|Blocking|Downloaded|Updating)|warning:|note: |test .* has been running for over)'
 
 failed=()
 for s in "${sections[@]}"; do
@@ -76,7 +78,9 @@ for s in "${sections[@]}"; do
         {
             echo '```text'
             # -q prints a dot per passed test, glued to the next printed line.
-            sed -E 's/^\.+//' "$out" | grep -Ev "$noise" | sed -E 's/[[:space:]]+$//'
+            keep=$(keep_of "$s")
+            sed -E 's/^\.+//' "$out" | grep -Ev "$noise" | grep -E "${keep:-.}" |
+                sed -E 's/[[:space:]]+$//'
             echo '```'
         } >"$body"
         # Replace the block's content, keep everything else of the page.
