@@ -15,7 +15,7 @@ use super::api::{Event, JobKind, JobState, LinkGap, fault_names, unix_ms};
 use super::fit_worker::FitWorker;
 use super::guarded_transport::{GuardedTransport, StopKind};
 use super::jobs;
-use super::shared::{Command, Shared};
+use super::shared::{Command, CommandError, Shared};
 use link::{Link, LinkConfig, LinkError, SerialTransport};
 
 /// Where the device is.
@@ -64,7 +64,42 @@ pub struct DeviceThread {
     /// Serial number from the device's Hello, learnt at the first connect.
     device_serial: Option<String>,
     open_gap: Option<LinkGap>,
-    calibration: Option<(u64, std::thread::JoinHandle<Result<String, String>>)>,
+    calibration: Option<(u64, std::thread::JoinHandle<CalibrationOutcome>)>,
+}
+
+/// What a calibration thread returns: the record's file name, or why it failed.
+#[cfg(feature = "sim")]
+type CalibrationOutcome = Result<String, jobs::SimCalibrationError>;
+#[cfg(not(feature = "sim"))]
+type CalibrationOutcome = Result<String, std::convert::Infallible>;
+
+/// Why the device thread could not open the link to the controller.
+#[derive(Debug, thiserror::Error)]
+pub enum ConnectError {
+    #[error(transparent)]
+    Discovery(#[from] usb::discovery::SerialListError),
+    #[error("controller with USB serial number {serial} not present")]
+    NotPresent { serial: String },
+    #[error("simulated controller unplugged")]
+    SimulatedUnplugged,
+    #[error("{path}: {source}")]
+    Open {
+        path: String,
+        #[source]
+        source: link::TransportError,
+    },
+    #[error("{path}: {source}")]
+    Link {
+        path: String,
+        #[source]
+        source: LinkError,
+    },
+    #[error("{path}: a different controller (serial {serial}, expected {expected}); not using it")]
+    DifferentController {
+        path: String,
+        serial: String,
+        expected: String,
+    },
 }
 
 impl std::fmt::Debug for DeviceThread {
@@ -116,7 +151,7 @@ impl DeviceThread {
                 return;
             }
             if !after_stop {
-                self.refuse_commands("device not connected");
+                self.refuse_commands();
             }
             match self.connect(after_stop) {
                 Ok(link) => {
@@ -139,9 +174,9 @@ impl DeviceThread {
                         // The device is not answering on the reopened port: from here on it
                         // is a lost link, with its gap on record.
                         after_stop = false;
-                        self.open_gap(e.clone());
+                        self.open_gap(e.to_string());
                     }
-                    self.shared.lock().status.last_error = Some(e);
+                    self.shared.lock().status.last_error = Some(e.to_string());
                     self.poll_calibration();
                     std::thread::sleep(Duration::from_millis(100));
                 }
@@ -149,13 +184,13 @@ impl DeviceThread {
         }
     }
 
-    fn refuse_commands(&mut self, why: &str) {
+    fn refuse_commands(&mut self) {
         while let Ok(c) = self.commands.try_recv() {
             match c {
                 Command::SetPressure { reply, .. }
                 | Command::Vent { reply, .. }
                 | Command::ClearFault { reply } => {
-                    let _ = reply.send(Err(why.to_string()));
+                    let _ = reply.send(Err(CommandError::NotConnected));
                 }
                 Command::Shutdown => self.shared.lock().shutdown = true,
             }
@@ -163,7 +198,7 @@ impl DeviceThread {
     }
 
     /// The port to open now.
-    fn locate(&self) -> Result<String, String> {
+    fn locate(&self) -> Result<String, ConnectError> {
         match &self.source {
             DeviceSource::Port { path } => {
                 let Some(serial) = &self.usb_serial else {
@@ -174,8 +209,8 @@ impl DeviceThread {
                     .into_iter()
                     .find(|p| p.serial_number.as_deref() == Some(serial.as_str()))
                     .map(|p| p.port)
-                    .ok_or_else(|| {
-                        format!("controller with USB serial number {serial} not present")
+                    .ok_or_else(|| ConnectError::NotPresent {
+                        serial: serial.clone(),
                     })
             }
             #[cfg(feature = "sim")]
@@ -183,31 +218,39 @@ impl DeviceThread {
                 .plug()
                 .pty_path()
                 .map(|p| p.display().to_string())
-                .ok_or_else(|| "simulated controller unplugged".to_string()),
+                .ok_or(ConnectError::SimulatedUnplugged),
         }
     }
 
     /// Opens the link. `after_stop`: reopening after a stop, when a stop requested since
     /// then must still go out (on the new link's first write); otherwise a pending stop is
     /// forgotten (a device that was lost and came back has rebooted vented and stopped).
-    fn connect(&mut self, after_stop: bool) -> Result<Link, String> {
+    fn connect(&mut self, after_stop: bool) -> Result<Link, ConnectError> {
         let path = self.locate()?;
-        let transport = SerialTransport::open(&path).map_err(|e| e.to_string())?;
+        let transport = SerialTransport::open(&path).map_err(|source| ConnectError::Open {
+            path: path.clone(),
+            source,
+        })?;
         let switch = Arc::clone(&self.shared.switch);
         if !after_stop {
             switch.clear_pending();
         }
         switch.unlock();
         let guarded = GuardedTransport::new(Box::new(transport), Arc::clone(&switch));
-        let mut link =
-            Link::connect(Box::new(guarded), self.config.link).map_err(|e| e.to_string())?;
+        let link_error = |source| ConnectError::Link {
+            path: path.clone(),
+            source,
+        };
+        let mut link = Link::connect(Box::new(guarded), self.config.link).map_err(link_error)?;
         let serial = link.info().serial.to_string();
         if let Some(expected) = &self.device_serial
             && *expected != serial
         {
-            return Err(format!(
-                "{path}: a different controller (serial {serial}, expected {expected}); not using it"
-            ));
+            return Err(ConnectError::DifferentController {
+                path,
+                serial,
+                expected: expected.clone(),
+            });
         }
         self.device_serial = Some(serial.clone());
         if self.usb_serial.is_none()
@@ -228,7 +271,7 @@ impl DeviceThread {
             tap.capture = None;
         }
         link.start_stream(self.config.idle_stream_hz, ChannelSet::ALL)
-            .map_err(|e| e.to_string())?;
+            .map_err(link_error)?;
         {
             let mut st = self.shared.lock();
             let s = &mut st.status;
@@ -326,7 +369,7 @@ impl DeviceThread {
             Command::ClearFault { reply } => (link.call(endpoints::ClearFault).map(|_| ()), reply),
         };
         let lost = result.as_ref().err().map(link_lost);
-        let _ = reply.send(result.map(|_| ()).map_err(|e| e.to_string()));
+        let _ = reply.send(result.map(|_| ()).map_err(CommandError::Device));
         match lost {
             Some(Some(reason)) => Err(self.link_ended(reason)),
             _ => Ok(()),
@@ -476,7 +519,7 @@ impl DeviceThread {
                 }
                 self.finish_job(id, JobState::Complete, "calibrated".into(), Some(path))
             }
-            Ok(Err(e)) => self.finish_job(id, JobState::Failed, e, None),
+            Ok(Err(e)) => self.finish_job(id, JobState::Failed, e.to_string(), None),
             Err(_) => self.finish_job(id, JobState::Failed, "calibration panicked".into(), None),
         }
     }

@@ -12,12 +12,11 @@ use super::api::{Event, FitSummary};
 use super::guarded_transport::StopSwitch;
 use fit::{FitOptions, FitPoint, LutModel, ModulusFit, fit_modulus};
 
-/// One request: fit `points`; `reply` gets the result (final fits).
+/// One request: fit `points` and publish the result on the live feed.
 #[derive(Debug)]
 pub struct FitRequest {
     pub points: Vec<FitPoint>,
     pub final_fit: bool,
-    pub reply: Option<Sender<Result<ModulusFit, String>>>,
 }
 
 /// Handle of the worker (dropping it ends the thread).
@@ -67,11 +66,23 @@ pub fn summary(fit: &ModulusFit) -> FitSummary {
     }
 }
 
+/// A fit table that cannot serve the daemon's fits.
+#[derive(Debug, thiserror::Error)]
+#[error("lookup table {}: {source}", path.display())]
+pub struct LoadLutError {
+    pub path: std::path::PathBuf,
+    #[source]
+    pub source: fem_core::lut::LutError,
+}
+
 /// Reads and checks a table; returns it with its content hash.
-pub fn load_lut(path: &Path) -> Result<(Arc<Lut>, String), String> {
-    let file = fem_core::lut::read_lut(path)
-        .map_err(|e| format!("lookup table {}: {e}", path.display()))?;
-    LutModel::new(&file.lut).map_err(|e| format!("lookup table {}: {e}", path.display()))?;
+pub fn load_lut(path: &Path) -> Result<(Arc<Lut>, String), LoadLutError> {
+    let error = |source| LoadLutError {
+        path: path.to_path_buf(),
+        source,
+    };
+    let file = fem_core::lut::read_lut(path).map_err(error)?;
+    LutModel::new(&file.lut).map_err(error)?;
     Ok((Arc::new(file.lut), file.sha256))
 }
 
@@ -96,9 +107,6 @@ fn run(lut: &Lut, rx: Receiver<FitRequest>, switch: &StopSwitch) {
                 model,
                 final_fit: request.final_fit,
             });
-        }
-        if let Some(reply) = request.reply {
-            let _ = reply.send(result.map_err(|e| e.to_string()));
         }
     }
 }

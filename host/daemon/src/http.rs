@@ -276,7 +276,7 @@ async fn status(State(app): State<App>) -> Response {
 
 async fn send_command(
     app: &App,
-    make: impl FnOnce(oneshot::Sender<Result<(), String>>) -> Command,
+    make: impl FnOnce(super::shared::CommandReply) -> Command,
 ) -> Response {
     if !app.shared.status().connected {
         return error(StatusCode::SERVICE_UNAVAILABLE, "device not connected");

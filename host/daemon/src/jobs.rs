@@ -74,22 +74,35 @@ pub fn load_calibration(
     Ok(LoadedCalibration { path, record })
 }
 
+/// Why a calibration on the simulated bench failed.
+#[cfg(feature = "sim")]
+#[derive(Debug, thiserror::Error)]
+pub enum SimCalibrationError {
+    #[error(transparent)]
+    Bench(#[from] experiment::simulated::SimRunError),
+    #[error("rigid-sample u_s(h): {0}")]
+    RigidSample(#[from] experiment::calibration::RigidSampleError),
+    #[error(transparent)]
+    Store(#[from] experiment::calibration::CalibrationStoreError),
+}
+
 /// Calibration on the simulated bench: camera px/mm from rendered reference discs and the
 /// proximity parabola on a rigid sample at 6 kPa (a second in-process bench, as
-/// `tactile demo` does). Returns the record's path.
+/// `tactile demo` does). Returns the record's file name.
 #[cfg(feature = "sim")]
-pub fn calibrate_sim(scenario: &hil_sim::scenario::Scenario, dir: &Path) -> Result<String, String> {
+pub fn calibrate_sim(
+    scenario: &hil_sim::scenario::Scenario,
+    dir: &Path,
+) -> Result<String, SimCalibrationError> {
     use experiment::calibration::RigidSampleCurve;
     use experiment::simulated::{
         DEMO_MAX_DEPTH_MM, DEMO_RIGID_MESH_LEVEL, DEMO_STEPS, px_per_mm_from_reference_disc,
         rigid_calibration, rigid_scenario, start_and_connect,
     };
-    let px = px_per_mm_from_reference_disc(scenario, &[1.2, 2.0, 2.8, 3.4])
-        .map_err(|e| e.to_string())?;
+    let px = px_per_mm_from_reference_disc(scenario, &[1.2, 2.0, 2.8, 3.4])?;
     let surface = scenario.stage.surface_mm;
     let pressure = 6.0;
-    let (bench, mut link) =
-        start_and_connect(rigid_scenario(scenario, pressure)).map_err(|e| e.to_string())?;
+    let (bench, mut link) = start_and_connect(rigid_scenario(scenario, pressure))?;
     // u_s(h) on the rigid sample from fem-core with the simulated rigid sample's own solver
     // settings (`rigid_scenario` solves at DEMO_RIGID_MESH_LEVEL; u_s = h would be wrong by up
     // to 27 µm, about -2 % in E2 at 200 kPa).
@@ -98,16 +111,14 @@ pub fn calibrate_sim(scenario: &hil_sim::scenario::Scenario, dir: &Path) -> Resu
         DEMO_RIGID_MESH_LEVEL,
         DEMO_STEPS,
         DEMO_MAX_DEPTH_MM,
-    )
-    .map_err(|e| format!("rigid-sample u_s(h): {e}"))?;
+    )?;
     let (sweep, zero) = rigid_calibration(
         &mut link,
         pressure,
         surface - 0.3,
         surface + 1.6,
         Some(&rigid),
-    )
-    .map_err(|e| e.to_string())?;
+    )?;
     let serial = link.info().serial.to_string();
     let firmware = link.info().firmware_version.to_string();
     drop(link);
@@ -124,8 +135,7 @@ pub fn calibrate_sim(scenario: &hil_sim::scenario::Scenario, dir: &Path) -> Resu
     record.px_per_mm_sigma = Some(px.px_per_mm_sigma);
     record.px_offset_px = px.offset_px;
     record.manometer_zero_kpa = zero;
-    let path =
-        experiment::calibration::record::save_record(dir, &record).map_err(|e| e.to_string())?;
+    let path = experiment::calibration::record::save_record(dir, &record)?;
     Ok(path
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())

@@ -207,7 +207,6 @@ impl<'a> LiveRadius<'a> {
             self.fit.submit(FitRequest {
                 points: self.points.clone(),
                 final_fit: false,
-                reply: None,
             });
         }
         let len = self.progress.length().unwrap_or(0).max(1) as f64;

@@ -39,6 +39,8 @@ pub enum DaemonError {
     NotLoopback(SocketAddr),
     #[error(transparent)]
     Token(#[from] TokenError),
+    #[error(transparent)]
+    Table(#[from] super::fit_worker::LoadLutError),
     #[error("cannot listen on {addr}: {source}")]
     Bind {
         addr: SocketAddr,
@@ -112,8 +114,8 @@ pub fn start(options: DaemonOptions) -> Result<DaemonHandle, DaemonError> {
         .map_err(|source| DaemonError::Bind { addr, source })?;
     let access = Access::for_addr(addr, token.clone());
     let login_url = super::dashboard::login_url(addr, &access.dashboard.new_login()?);
-    let (lut, lut_sha256) =
-        super::fit_worker::load_lut(&options.lut_path).map_err(DaemonError::Start)?;
+    let (lut, lut_sha256) = super::fit_worker::load_lut(&options.lut_path)
+        .map_err(|e| DaemonError::Start(e.to_string()))?;
     let (events, _) = broadcast::channel(4096);
     let switch = StopSwitch::new(events);
     let (cmd_tx, cmd_rx) = std::sync::mpsc::channel::<Command>();

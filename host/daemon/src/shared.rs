@@ -12,20 +12,24 @@ use super::api::{Event, ExperimentRequest, Job, JobKind, JobState, StatusReport}
 use super::guarded_transport::StopSwitch;
 use experiment::records::unix_now_s;
 
+/// Why the device thread did not carry out a command.
+#[derive(Debug, thiserror::Error)]
+pub enum CommandError {
+    #[error("device not connected")]
+    NotConnected,
+    #[error(transparent)]
+    Device(#[from] link::LinkError),
+}
+
+/// The device thread's answer to a command.
+pub type CommandReply = oneshot::Sender<Result<(), CommandError>>;
+
 /// A command for the device thread, answered through `reply`.
 #[derive(Debug)]
 pub enum Command {
-    SetPressure {
-        kpa: f64,
-        reply: oneshot::Sender<Result<(), String>>,
-    },
-    Vent {
-        open: bool,
-        reply: oneshot::Sender<Result<(), String>>,
-    },
-    ClearFault {
-        reply: oneshot::Sender<Result<(), String>>,
-    },
+    SetPressure { kpa: f64, reply: CommandReply },
+    Vent { open: bool, reply: CommandReply },
+    ClearFault { reply: CommandReply },
     Shutdown,
 }
 

@@ -55,8 +55,13 @@ pub fn usb_role(vid: u16, pid: u16) -> Option<UsbRole> {
     }
 }
 
-pub fn list_serial_ports() -> Result<Vec<SerialPortEntry>, String> {
-    let ports = serialport::available_ports().map_err(|e| e.to_string())?;
+/// The operating system's serial-port enumeration failed.
+#[derive(Debug, thiserror::Error)]
+#[error("listing serial ports: {0}")]
+pub struct SerialListError(#[from] serialport::Error);
+
+pub fn list_serial_ports() -> Result<Vec<SerialPortEntry>, SerialListError> {
+    let ports = serialport::available_ports()?;
     Ok(ports
         .into_iter()
         .map(|p| match p.port_type {
@@ -131,7 +136,7 @@ pub fn list_usb_devices() -> Result<Vec<UsbEntry>, String> {
 pub fn discover() -> DeviceReport {
     let (serial_ports, serial_note) = match list_serial_ports() {
         Ok(p) => (p, None),
-        Err(e) => (Vec::new(), Some(e)),
+        Err(e) => (Vec::new(), Some(e.to_string())),
     };
     let (usb, usb_note) = match list_usb_devices() {
         Ok(u) => (u, None),
