@@ -215,6 +215,9 @@ async function run(browser) {
   // The record with its plots and files.
   await page.click('#record-list li a');
   await page.waitForSelector('#record-detail .record-fit');
+  // The file list follows the plots, which load one by one: wait for it (the plots of a
+  // record are a few SVGs of tens of kB; 20 s covers a starved machine).
+  await page.waitForSelector('#record-detail ul.list a', { timeout: 20000 }).catch(() => {});
   const links = await page.$$eval('#record-detail a', (as) => as.map((a) => a.textContent));
   check('the record shows its fit and downloadable files', ['fit.json', 'curve.csv', 'meta.json'].every((f) => links.includes(f)),
     links.join(' '));
