@@ -13,7 +13,8 @@
 #
 # Environment: VM_TIMEOUT_S (default 420: the cases take 1-3 min under TCG on a loaded
 # 2-core machine, boot ~15 s), VM_SKIP_BUILD=1 (use the existing release binaries),
-# VM_KEEP=1 (keep the initramfs tree), VM_CPUS (default 2), VM_MEM_MB (default 1024).
+# VM_KEEP=1 (keep the initramfs tree), VM_CASES=a,b (only these cases of
+# scripts/vm/cases.sh), VM_CPUS (default 2), VM_MEM_MB (default 1024).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 root=$(pwd)
@@ -137,7 +138,7 @@ timeout --foreground -k 10 "$timeout_s" qemu-system-x86_64 \
     -machine q35 -accel tcg,thread=multi -cpu max -smp "$cpus" -m "$mem" \
     -nographic -no-reboot -nodefaults -serial stdio -monitor none \
     -kernel "$vmlinuz" -initrd "$work/initramfs.gz" \
-    -append "console=ttyS0 panic=-1 quiet loglevel=4 rdinit=/init" \
+    -append "console=ttyS0 panic=-1 quiet loglevel=4 rdinit=/init${VM_CASES:+ vmtest.cases=$VM_CASES}" \
     </dev/null >"$log" 2>&1
 qemu_rc=$?
 set -e

@@ -13,8 +13,9 @@ use crate::camera::PixelFormat;
 use crate::device::SimFrame;
 use crate::v4l2_mmap_out::MmapOutput;
 
-/// Driver buffers: enough to ride over a scheduling hiccup, few enough to keep latency low.
-const BUFFERS: u32 = 4;
+/// Driver buffers: the fewest that keep an output queue streaming; every further buffer
+/// delays a frame by one output period (the host stamps frames when it dequeues them).
+const BUFFERS: u32 = 2;
 
 /// Why frames cannot be published.
 #[derive(Debug, thiserror::Error)]

@@ -12,8 +12,13 @@ HILSIM_PID=
 
 detail() { echo "$*" >/tmp/detail; }
 
+# `vmtest.cases=a,b` on the kernel command line (VM_CASES=a,b for scripts/vm-test.sh) runs
+# only those cases (and the ones they depend on must be listed too).
+ONLY=$(sed -n 's/.*vmtest\.cases=\([^ ]*\).*/,\1,/p' /proc/cmdline)
+
 run() {
     name=$1
+    case "$ONLY" in "" | *",$name,"*) ;; *) return 0 ;; esac
     : >/tmp/detail
     t0=$(cut -d' ' -f1 /proc/uptime)
     if "case_$name" >"/tmp/$name.log" 2>&1; then
@@ -202,12 +207,58 @@ case_vivid_loop() {
     v4l2-ctl -d /dev/video0 --set-dv-bt-timings index=0 || return 1
     v4l2-ctl -d /dev/video1 --set-dv-bt-timings index=0 || return 1
     v4l2-ctl -d /dev/video0 -c loop_video=1 || return 1
+    # no on-screen text (frame counter, control values) drawn over the looped frames
+    v4l2-ctl -d /dev/video0 -c osd_text_mode=2 || return 1
     v4l2-ctl -d /dev/video0 --get-dv-timings
     v4l2-ctl -d /dev/video0 --set-fmt-video=width=640,height=480,pixelformat=GREY || return 1
     v4l2-ctl -d /dev/video0 --get-fmt-video | tee /tmp/fmt.txt
     grep -q "Width/Height *: 640/480" /tmp/fmt.txt || return 1
     grep -q "GREY" /tmp/fmt.txt || return 1
     detail "$(cat /sys/class/video4linux/video0/name) -> video0 and video1 at 640x480, GREY offered, loop on"
+}
+
+# hil-sim's frames through vivid without a host on the serial port: a scenario whose own
+# programme switches the LED on and indents the sample; frames captured with v4l2-ctl
+# before and during contact, measured with `tactile radius`.
+case_camera_frames() {
+    cat >/tmp/frames.toml <<'TOML'
+name = "vm-frames"
+duration_s = 60.0
+[camera]
+fps = 30.0
+[[programme]]
+at_s = 0.0
+request = { SetLed = { duty_per_10k = 10000 } }
+[[programme]]
+at_s = 0.0
+request = { SetPressure = { setpoint_kpa = 6.0 } }
+[[programme]]
+at_s = 3.0
+indent_to_mm = 1.5
+speed_mm_per_s = 1.0
+TOML
+    hilsim_start --scenario /tmp/frames.toml --camera-out /dev/video1 --pacing realtime || return 1
+    sleep 2
+    grab /tmp/ref.pgm || return 1
+    sleep 6
+    grab /tmp/contact.pgm || return 1
+    hilsim_stop
+    for f in ref contact; do
+        echo "$f: middle row, every 16th pixel:"
+        od -A n -t u1 -v -w640 -j $((15 + 240 * 640)) -N 640 /tmp/$f.pgm | awk '{ for (i = 1; i <= NF; i += 16) printf "%s ", $i; print "" }'
+    done
+    cat "$HILSIM_LOG"
+    tactile radius /tmp/contact.pgm --reference /tmp/ref.pgm --json | tee /tmp/radius.json || return 1
+    r=$(sed -n 's/.*"radius_px": *\([0-9.]*\).*/\1/p' /tmp/radius.json | head -n 1)
+    detail "contact radius $r px through vivid"
+    [ -n "$r" ]
+}
+
+# One frame from vivid's capture node as a PGM file.
+grab() {
+    v4l2-ctl -d /dev/video0 --stream-mmap --stream-count=1 --stream-to=/tmp/grab.raw || return 1
+    printf 'P5\n640 480\n255\n' >"$1"
+    cat /tmp/grab.raw >>"$1"
 }
 
 # The proximity sensor, the manometer zero and the load tare on the rigid-sample bench,
@@ -231,6 +282,20 @@ case_calibrate_rigid() {
     detail "manometer, load and proximity (6 kPa) over $port; record $(basename "$rec")"
 }
 
+# What a failed measurement left.
+measure_evidence() {
+    cat /tmp/measure.json "$HILSIM_LOG"
+    ls -la /tmp/measure
+    head -n 3 /tmp/measure/frames.csv
+    awk -F, 'NR > 1 && $2 > m { m = $2 } END { print NR - 1, "frames, largest radius", m }' /tmp/measure/frames.csv
+    awk -F, 'NR > 1 { if ($7 > m) m = $7; if (n == "" || $7 < n) n = $7 } END { print NR - 1, "samples, stage steps", n, "..", m }' /tmp/measure/samples.csv
+    sed -n '/"frames"/,/}/p' /tmp/measure/meta.json
+    v4l2-ctl -d /dev/video0 --stream-mmap --stream-count=1 --stream-to=/tmp/f.raw
+    echo "middle row of a captured frame (every 16th pixel):"
+    od -A n -t u1 -v -w640 -j $((240 * 640)) -N 640 /tmp/f.raw | awk '{ for (i = 1; i <= NF; i += 16) printf "%s ", $i; print "" }'
+
+}
+
 # A whole experiment: samples over /dev/ttyACM0, frames rendered by hil-sim, written to
 # vivid's output and captured from /dev/video0; the fitted modulus against the simulated
 # sample's (200 kPa, the default gelatin).
@@ -240,10 +305,11 @@ case_measure() {
     printf 'name = "vm-measure"\n[camera]\nfps = 30.0\n' >/tmp/measure.toml
     hilsim_start --scenario /tmp/measure.toml --camera-out /dev/video1 || return 1
     port=$(acm_port)
-    # two indentations of 1.7 mm at 2 mm/s plus settling: ~10 s native
+    # two indentations of 1.7 mm at 1 mm/s plus settling: ~15 s native
     timeout 600 tactile measure --port "$port" --camera /dev/video0 --start 0.8 --repeats 2 \
+        --speed 1 \
         --calibration-dir /tmp/cal --out /tmp/measure --lut /data/default.lut --json \
-        >/tmp/measure.json || { cat /tmp/measure.json; cat "$HILSIM_LOG"; return 1; }
+        >/tmp/measure.json || { measure_evidence; return 1; }
     cat /tmp/measure.json
     e2=$(sed -n 's/^{"modulus_kpa":\([0-9.]*\),.*/\1/p' /tmp/measure.json)
     frames=$(sed -n 's/.*"frames":\([0-9]*\),.*/\1/p' /tmp/measure.json)
@@ -269,6 +335,7 @@ run devices_lists_controller
 run calibrate_manometer
 run daemon_reconnects
 run vivid_loop
+run camera_frames
 run calibrate_rigid
 run measure
 hilsim_stop

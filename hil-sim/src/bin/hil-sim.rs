@@ -186,7 +186,7 @@ fn main() -> ExitCode {
             return run_firmware(device, built);
         }
         let options = BenchOptions {
-            pacing: args.pacing,
+            pacing: camera_pacing(&args),
             camera: args.camera,
             ..BenchOptions::default()
         };
@@ -239,7 +239,7 @@ fn main() -> ExitCode {
         return ExitCode::SUCCESS;
     }
     let options = BenchOptions {
-        pacing: args.pacing,
+        pacing: camera_pacing(&args),
         camera: args.camera,
         ..BenchOptions::default()
     };
@@ -270,25 +270,54 @@ fn serve_until_killed(
     };
     println!("{}", handle.pty_path().display());
     // Serve until killed. Without --camera-out frames go unconsumed (the in-process API
-    // hands them out); with it each is written to the output device.
+    // hands them out). With it the output is kept fed like a video link: the newest frame
+    // is queued whenever the driver hands a buffer back (a blocking dequeue paces this loop
+    // at the output's own frame rate), repeating the last frame when no new one has been
+    // rendered yet, since vivid's loop shows a test pattern whenever its output queue runs
+    // dry. A driver that returns buffers at once (v4l2loopback) gets a repeat at most every
+    // REPEAT_EVERY.
+    const REPEAT_EVERY: std::time::Duration = std::time::Duration::from_millis(10);
+    let mut latest: Option<hil_sim::device::SimFrame> = None;
+    let mut last_write = Instant::now();
     loop {
-        match handle
-            .frames
-            .recv_timeout(std::time::Duration::from_millis(50))
-        {
-            Ok(frame) => {
-                if let Some(out) = camera_out.as_mut()
-                    && let Err(e) = out.write_frame(&frame)
-                {
-                    // The device went away (driver unloaded or unbound): the bench goes on
-                    // without a camera, as the controller does when its camera cable is pulled.
-                    eprintln!("hil-sim: camera output stopped after {} frames: {e}", out.written);
-                    camera_out = None;
-                }
-            }
-            Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
-            Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => return ExitCode::from(1),
+        let mut fresh = false;
+        while let Ok(frame) = handle.frames.try_recv() {
+            latest = Some(frame);
+            fresh = true;
         }
+        let Some(out) = camera_out.as_mut() else {
+            std::thread::sleep(std::time::Duration::from_millis(5));
+            continue;
+        };
+        let Some(frame) = latest.as_ref() else {
+            std::thread::sleep(std::time::Duration::from_millis(2));
+            continue;
+        };
+        if !fresh && last_write.elapsed() < REPEAT_EVERY {
+            std::thread::sleep(REPEAT_EVERY.saturating_sub(last_write.elapsed()));
+            continue;
+        }
+        if let Err(e) = out.write_frame(frame) {
+            // The device went away (driver unloaded or unbound): the bench goes on without
+            // a camera, as the controller does when the camera's cable is pulled.
+            eprintln!(
+                "hil-sim: camera output stopped after {} frames: {e}",
+                out.written
+            );
+            camera_out = None;
+        }
+        last_write = Instant::now();
+    }
+}
+
+/// `auto` pacing renders no frames until a host speaks on the serial port; a camera
+/// published with `--camera-out` is watched independently of the serial port (a host takes
+/// its no-contact reference frames from it), so it runs in real time from the start.
+fn camera_pacing(args: &Args) -> Pacing {
+    if args.camera_out.is_some() && args.pacing == Pacing::Auto {
+        Pacing::RealTime
+    } else {
+        args.pacing
     }
 }
 
