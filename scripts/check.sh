@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # The whole test suite: the repository's text checks, formatting, lints, the no_std checks,
 # every test of the workspace, the RP2040 firmware's release build with its size budget, and
-# that binary in the emulated chip against hil-sim's plant (scripts/firmware-emulation-test.sh).
-# This is what CI runs.
+# that binary in the emulated chip against hil-sim's plant (scripts/firmware-emulation-test.sh),
+# and the release binaries over Linux's own USB serial and V4L2 drivers in a virtual machine
+# (scripts/vm-test.sh). This is what CI runs.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -39,5 +40,8 @@ if [ -f firmware/rp2040/Cargo.toml ]; then
     step "firmware/rp2040: the release binary in the emulated chip"
     scripts/firmware-emulation-test.sh
 fi
+
+step "kernel-driver tier: the release binaries in a virtual machine (scripts/vm-test.sh)"
+scripts/vm-test.sh
 
 printf '\nAll checks passed in %ss.\n' "$(( $(date +%s) - start ))"

@@ -7,14 +7,16 @@
 # The cases themselves are scripts/vm/cases.sh (run by scripts/vm/init.sh as PID 1).
 #
 # Installs what it needs (idempotent): qemu-system-x86, busybox-static and v4l-utils (its
-# v4l2-ctl sets vivid up inside the machine) from Debian, the kernel package downloaded once into target/vm-cache (never into git). Prints one line per
-# case and `N passed, M failed` last; exits non-zero on any failure or if the VM does not
-# finish within VM_TIMEOUT_S.
+# v4l2-ctl sets vivid up inside the machine) from Debian, and Debian's kernel package,
+# downloaded once into target/vm-cache (never into git). Prints one line per case and
+# `N passed, M failed` last; exits non-zero on any failure or if the VM does not finish
+# within VM_TIMEOUT_S.
 #
-# Environment: VM_TIMEOUT_S (default 420: the cases take 1-3 min under TCG on a loaded
-# 2-core machine, boot ~15 s), VM_SKIP_BUILD=1 (use the existing release binaries),
-# VM_KEEP=1 (keep the initramfs tree), VM_CASES=a,b (only these cases of
-# scripts/vm/cases.sh), VM_CPUS (default 2), VM_MEM_MB (default 1024).
+# Environment: VM_TIMEOUT_S (default 420: boot and cases take about a minute under TCG
+# emulation without KVM; a loaded 2-core machine may need several times that),
+# VM_SKIP_BUILD=1 (use the existing release binaries), VM_KEEP=1 (keep the initramfs
+# tree), VM_CASES=a,b (only these cases of scripts/vm/cases.sh), VM_CPUS (default 2),
+# VM_MEM_MB (default 1024).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 root=$(pwd)

@@ -22,8 +22,8 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
 
-use hil_sim::camera_out::CameraOut;
 use hil_sim::bench::{BenchHandle, BenchOptions, Pacing, start, start_firmware, start_on_tty};
+use hil_sim::camera_out::CameraOut;
 use hil_sim::device::SimDevice;
 use hil_sim::firmware_emulation::{EmulatorConfig, FirmwareDevice};
 use hil_sim::scenario::Scenario;
@@ -119,7 +119,8 @@ fn parse_args() -> Result<Args, String> {
                 args.serve_tty = Some(it.next().ok_or("--serve-tty needs a terminal path")?.into());
             }
             "--camera-out" => {
-                args.camera_out = Some(it.next().ok_or("--camera-out needs a video device")?.into());
+                args.camera_out =
+                    Some(it.next().ok_or("--camera-out needs a video device")?.into());
             }
             "-h" | "--help" => args.help = true,
             other => return Err(format!("unknown argument `{other}` (try --help)")),
@@ -190,11 +191,11 @@ fn main() -> ExitCode {
             camera: args.camera,
             ..BenchOptions::default()
         };
-        let camera_out = match open_camera_out(args.camera_out.as_deref(), device.plant().scenario())
-        {
-            Ok(c) => c,
-            Err(code) => return code,
-        };
+        let camera_out =
+            match open_camera_out(args.camera_out.as_deref(), device.plant().scenario()) {
+                Ok(c) => c,
+                Err(code) => return code,
+            };
         return serve_until_killed(
             match &args.serve_tty {
                 Some(path) => start_on_tty(Box::new(device), options, path),

@@ -223,9 +223,8 @@ mod tests {
             offset_px: None,
             samples: 1,
         };
-        let mut source =
-            CameraRadiusSource::start(Unplugged { good: 3, sent: 0 }, reference, px)
-                .expect("start");
+        let mut source = CameraRadiusSource::start(Unplugged { good: 3, sent: 0 }, reference, px)
+            .expect("start");
         let clock = ClockMap::default();
         let mut measured = 0;
         // LOST_AFTER_ERRORS failures, ERROR_PAUSE apart: ~0.1 s; 10 s for a loaded machine
