@@ -39,10 +39,11 @@ struct Args {
     unique_id: Option<[u8; 8]>,
     serve_tty: Option<PathBuf>,
     camera_out: Option<PathBuf>,
+    camera_truth: Option<PathBuf>,
     help: bool,
 }
 
-const USAGE: &str = "usage: hil-sim [--scenario FILE] [--seed N] [--pacing auto|realtime|fast] [--no-camera] [--run] [--save-curves DIR] [--firmware FILE.elf [--unique-id HEX16]] [--serve-tty PATH] [--camera-out /dev/videoN]
+const USAGE: &str = "usage: hil-sim [--scenario FILE] [--seed N] [--pacing auto|realtime|fast] [--no-camera] [--run] [--save-curves DIR] [--firmware FILE.elf [--unique-id HEX16]] [--serve-tty PATH] [--camera-out /dev/videoN [--camera-truth FILE]]
 
 Serves the simulated bench on a pseudo-terminal (its path is printed) until killed.
   --scenario FILE   scenario TOML (default: the built-in gelatin sample on the shipped table)
@@ -59,6 +60,8 @@ Serves the simulated bench on a pseudo-terminal (its path is printed) until kill
                     after a hang-up (the gadget's host went away)
   --camera-out DEV  write the rendered frames to this V4L2 video output device (vivid's
                     output -> capture loop, v4l2loopback) in the scenario's format and size
+  --camera-truth FILE  with --camera-out: one line per new frame published, `seq,time_us,
+                    radius_px` (the contact radius it was rendered with: ground truth)
   -h, --help        this text";
 
 fn parse_args() -> Result<Args, String> {
@@ -73,6 +76,7 @@ fn parse_args() -> Result<Args, String> {
         unique_id: None,
         serve_tty: None,
         camera_out: None,
+        camera_truth: None,
         help: false,
     };
     let mut it = std::env::args().skip(1);
@@ -121,6 +125,9 @@ fn parse_args() -> Result<Args, String> {
             "--camera-out" => {
                 args.camera_out =
                     Some(it.next().ok_or("--camera-out needs a video device")?.into());
+            }
+            "--camera-truth" => {
+                args.camera_truth = Some(it.next().ok_or("--camera-truth needs a file")?.into());
             }
             "-h" | "--help" => args.help = true,
             other => return Err(format!("unknown argument `{other}` (try --help)")),
@@ -202,6 +209,7 @@ fn main() -> ExitCode {
                 None => start_firmware(device, options),
             },
             camera_out,
+            args.camera_truth.as_deref(),
         );
     }
     if args.unique_id.is_some() {
@@ -255,13 +263,23 @@ fn main() -> ExitCode {
             None => start(scenario, options),
         },
         camera_out,
+        args.camera_truth.as_deref(),
     )
 }
 
 fn serve_until_killed(
     started: Result<BenchHandle, hil_sim::device::SimError>,
     mut camera_out: Option<CameraOut>,
+    truth_path: Option<&std::path::Path>,
 ) -> ExitCode {
+    use std::io::Write;
+    let mut truth = match truth_path.map(std::fs::File::create).transpose() {
+        Ok(f) => f.map(std::io::LineWriter::new),
+        Err(e) => {
+            eprintln!("hil-sim: --camera-truth: {e}");
+            return ExitCode::from(2);
+        }
+    };
     let handle = match started {
         Ok(h) => h,
         Err(e) => {
@@ -297,6 +315,14 @@ fn serve_until_killed(
         if !fresh && last_write.elapsed() < REPEAT_EVERY {
             std::thread::sleep(REPEAT_EVERY.saturating_sub(last_write.elapsed()));
             continue;
+        }
+        if fresh && let Some(t) = truth.as_mut() {
+            // ground truth for tests; a full disk must not stop the bench
+            let _ = writeln!(
+                t,
+                "{},{},{:.3}",
+                frame.seq, frame.timestamp_us, frame.truth_radius_px
+            );
         }
         if let Err(e) = out.write_frame(frame) {
             // The device went away (driver unloaded or unbound): the bench goes on without
