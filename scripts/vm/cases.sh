@@ -253,11 +253,29 @@ speed_mm_per_s = 1.0
 TOML
     hilsim_start --scenario /tmp/frames.toml --camera-out /dev/video1 --pacing realtime \
         --camera-truth /tmp/truth.csv || return 1
-    sleep 2
+    # frames are published from the start; the indentation starts 3 s into the simulation
+    i=0
+    until [ -s /tmp/truth.csv ]; do
+        i=$((i + 1))
+        [ "$i" -gt 600 ] && { echo "no frame published in 60 s"; return 1; }
+        sleep 0.1
+    done
+    sleep 1
     grab /tmp/ref.pgm || return 1
-    # the indentation ends 4.5 s into the run (simulated time, which may lag under
-    # emulation); the contact is static from then on
-    sleep 8
+    truth_ref=$(tail -n 1 /tmp/truth.csv | cut -d, -f3)
+    [ "$truth_ref" = 0.000 ] || { echo "reference frame rendered with contact ($truth_ref px)"; return 1; }
+    # The indentation ends 4.5 s into the simulation, which may lag the wall clock under
+    # emulation: wait until the rendered radius has stopped growing (120 s at most).
+    i=0
+    prev=x
+    while :; do
+        now=$(tail -n 1 /tmp/truth.csv | cut -d, -f3)
+        awk "BEGIN { exit !(\"$prev\" != \"x\" && $now > 0 && $now - $prev < 0.05) }" && break
+        prev=$now
+        i=$((i + 1))
+        [ "$i" -gt 120 ] && { echo "the contact did not settle: $now px"; return 1; }
+        sleep 1
+    done
     truth_before=$(tail -n 1 /tmp/truth.csv | cut -d, -f3)
     grab /tmp/contact.pgm || return 1
     truth_after=$(tail -n 1 /tmp/truth.csv | cut -d, -f3)
