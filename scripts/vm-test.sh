@@ -122,7 +122,7 @@ add_module() {
     loaded[$name]=1
     order+=("$name")
 }
-for m in configfs dummy_hcd libcomposite usb_f_acm usb_f_fs cdc_acm vivid; do add_module "$m"; done
+for m in configfs dummy_hcd libcomposite usb_f_acm cdc_acm vivid; do add_module "$m"; done
 for m in "${order[@]}"; do
     cp "${modpath[$m]}" "$tree/lib/modules/$m.ko"
 done
