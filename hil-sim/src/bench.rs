@@ -425,32 +425,27 @@ fn spawn(
                     hangup_ends: matches!(served, Served::Tty(_)),
                 };
                 if let Served::Tty(port) = served {
-                    // The same device for the bench's lifetime; the terminal is reopened
-                    // after a hang-up.
+                    // The same device for the bench's lifetime. After a hang-up the
+                    // terminal is reopened (every 20 ms until it opens and stays open); the
+                    // simulation pauses meanwhile and carries on in real time from where it
+                    // stopped.
                     let mut port = Some(port);
                     loop {
-                        if let Some(p) = port.as_mut() {
-                            let hung_up = serve(device.as_mut(), p, &options, &wiring);
-                            if hung_up {
-                                port = None;
-                            }
+                        if let Some(p) = port.as_mut()
+                            && serve(device.as_mut(), p, &options, &wiring)
+                        {
+                            port = None;
                         }
-                        let finished = |total: &mut SimStats, device: &dyn BenchDevice| {
-                            add_stats(total, device.stats());
-                        };
-                        if stop.load(Ordering::SeqCst) {
-                            finished(&mut total, device.as_ref());
-                            return total;
-                        }
-                        while !plug.is_plugged() || port.is_none() {
-                            if stop.load(Ordering::SeqCst) {
-                                finished(&mut total, device.as_ref());
-                                return total;
-                            }
+                        while !stop.load(Ordering::SeqCst) && (!plug.is_plugged() || port.is_none())
+                        {
                             if port.is_none() {
                                 port = reopen_tty(&pty_path_of(&plug));
                             }
                             std::thread::sleep(Duration::from_millis(20));
+                        }
+                        if stop.load(Ordering::SeqCst) {
+                            add_stats(&mut total, device.stats());
+                            return total;
                         }
                         options.pacing = Pacing::RealTime;
                     }

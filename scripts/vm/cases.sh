@@ -358,7 +358,7 @@ case_camera_unplugged() {
     [ "$rc" -ne 0 ] || return 1
     grep -q 'video0' /tmp/unplug.out || return 1
     [ -f /tmp/unplug/meta.json ] && [ -f /tmp/unplug/samples.csv ] || return 1
-    detail "$(grep -o 'error: .*' /tmp/unplug.out | head -n 1 | cut -c1-160)"
+    detail "$(grep -o 'error: .*' /tmp/unplug.out | head -n 1 | cut -c1-240)"
 }
 
 # What a failed measurement left.
