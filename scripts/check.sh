@@ -2,8 +2,9 @@
 # The whole test suite: the repository's text checks, formatting, lints, the no_std checks,
 # every test of the workspace, the RP2040 firmware's release build with its size budget, and
 # that binary in the emulated chip against hil-sim's plant (scripts/firmware-emulation-test.sh),
-# and the daemon's web dashboard in headless Chromium (scripts/dashboard-browser-test.sh).
-# This is what CI runs.
+# the daemon's web dashboard in headless Chromium (scripts/dashboard-browser-test.sh), and the
+# release binaries over Linux's own USB serial and V4L2 drivers in a virtual machine
+# (scripts/vm-test.sh). This is what CI runs.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -43,5 +44,12 @@ fi
 
 step "the web dashboard in headless Chromium (scripts/dashboard-browser-test.sh)"
 scripts/dashboard-browser-test.sh
+
+step "kernel-driver tier: the release binaries in a virtual machine (scripts/vm-test.sh)"
+if [ "${VM_TEST:-1}" = 0 ]; then
+    echo "SKIPPED: VM_TEST=0 (CI runs it)"
+else
+    scripts/vm-test.sh
+fi
 
 printf '\nAll checks passed in %ss.\n' "$(( $(date +%s) - start ))"

@@ -335,7 +335,7 @@ pub fn start_firmware(
 
 /// As [`start`] with any [`BenchDevice`].
 pub fn start_boxed(
-    mut device: Box<dyn BenchDevice>,
+    device: Box<dyn BenchDevice>,
     options: BenchOptions,
 ) -> Result<BenchHandle, SimError> {
     let (mut master, slave) = TTYPort::pair().map_err(|e| SimError::Pty(e.to_string()))?;
@@ -346,6 +346,55 @@ pub fn start_boxed(
     master
         .set_timeout(Duration::from_millis(0))
         .map_err(|e| SimError::Pty(e.to_string()))?;
+    spawn(device, options, pty_path, Served::Pty(master, slave))
+}
+
+/// As [`start_boxed`], serving an existing terminal device instead of a new
+/// pseudo-terminal: the device side of a USB serial gadget (`/dev/ttyGS0`, whose host side
+/// is a real CDC-ACM port), or one end of a serial cable. The terminal is opened in raw
+/// mode. The plug ([`BenchHandle::plug`]) pauses the device while unplugged and resumes the
+/// same device on the same terminal when plugged back (the cable of a real gadget is its
+/// USB device controller binding, outside this process).
+pub fn start_on_tty(
+    device: Box<dyn BenchDevice>,
+    options: BenchOptions,
+    path: &std::path::Path,
+) -> Result<BenchHandle, SimError> {
+    let name = path.display().to_string();
+    let port = serialport::new(&name, 115_200)
+        .timeout(Duration::from_millis(0))
+        .open_native()
+        .map_err(|e| SimError::Pty(format!("{name}: {e}")))?;
+    spawn(device, options, path.to_path_buf(), Served::Tty(port))
+}
+
+fn pty_path_of(plug: &BenchPlug) -> Option<PathBuf> {
+    plug.path.lock().ok().and_then(|p| p.clone())
+}
+
+/// Opens an existing terminal again after a hang-up (`None` while it cannot be opened).
+fn reopen_tty(path: &Option<PathBuf>) -> Option<TTYPort> {
+    let name = path.as_ref()?.display().to_string();
+    serialport::new(&name, 115_200)
+        .timeout(Duration::from_millis(0))
+        .open_native()
+        .ok()
+}
+
+/// The terminal a bench serves.
+enum Served {
+    /// A pseudo-terminal pair (master, slave); replaced by a new pair at every replug.
+    Pty(TTYPort, TTYPort),
+    /// An existing terminal, kept across unplug and replug.
+    Tty(TTYPort),
+}
+
+fn spawn(
+    mut device: Box<dyn BenchDevice>,
+    options: BenchOptions,
+    pty_path: PathBuf,
+    served: Served,
+) -> Result<BenchHandle, SimError> {
     let (frame_tx, frames) = sync_channel(options.frame_queue.max(1));
     let stop = Arc::new(AtomicBool::new(false));
     let epoch = Arc::new(Mutex::new(None));
@@ -367,18 +416,48 @@ pub fn start_boxed(
             .spawn(move || {
                 let mut total = SimStats::default();
                 let mut options = options;
-                let mut pty = Some((master, slave));
+                let wiring = Wiring {
+                    frame_tx: &frame_tx,
+                    stop: &stop,
+                    epoch: &epoch,
+                    plug: &plug,
+                    probe: &probe,
+                    hangup_ends: matches!(served, Served::Tty(_)),
+                };
+                if let Served::Tty(port) = served {
+                    // The same device for the bench's lifetime. After a hang-up the
+                    // terminal is reopened (every 20 ms until it opens and stays open); the
+                    // simulation pauses meanwhile and carries on in real time from where it
+                    // stopped.
+                    let mut port = Some(port);
+                    loop {
+                        if let Some(p) = port.as_mut()
+                            && serve(device.as_mut(), p, &options, &wiring)
+                        {
+                            port = None;
+                        }
+                        while !stop.load(Ordering::SeqCst) && (!plug.is_plugged() || port.is_none())
+                        {
+                            if port.is_none() {
+                                port = reopen_tty(&pty_path_of(&plug));
+                            }
+                            std::thread::sleep(Duration::from_millis(20));
+                        }
+                        if stop.load(Ordering::SeqCst) {
+                            add_stats(&mut total, device.stats());
+                            return total;
+                        }
+                        options.pacing = Pacing::RealTime;
+                    }
+                }
+                let mut pty = match served {
+                    Served::Pty(master, slave) => Some((master, slave)),
+                    Served::Tty(_) => None,
+                };
                 loop {
                     if let Some((mut master, slave)) = pty.take() {
                         // The slave end stays open as long as the device is powered.
                         let _slave = slave;
-                        let wiring = Wiring {
-                            frame_tx: &frame_tx,
-                            stop: &stop,
-                            epoch: &epoch,
-                            plug: &plug,
-                            probe: &probe,
-                        };
                         serve(device.as_mut(), &mut master, &options, &wiring);
                     }
                     add_stats(&mut total, device.stats());
@@ -446,6 +525,10 @@ struct Wiring<'a> {
     epoch: &'a Mutex<Option<Instant>>,
     plug: &'a BenchPlug,
     probe: &'a BenchProbe,
+    /// An existing terminal: end of file or an I/O error on reading means it was hung up
+    /// (a USB gadget's host went away) and `serve` returns so the terminal can be reopened.
+    /// (A PTY master reads EIO whenever no process has the slave open: not an end.)
+    hangup_ends: bool,
 }
 
 /// How much faster than real time `Auto` runs while no host has spoken.
@@ -458,19 +541,21 @@ const TICKS_PER_BATCH: usize = 2;
 /// simulated time to now (a few ticks: host bytes wait at most that long in the port).
 const LAG_REANCHOR_S: f64 = 0.002;
 
-/// Serves one powered-up device until the bench stops or the cable is pulled.
+/// Serves one powered-up device until the bench stops or the cable is pulled; true if the
+/// terminal was hung up instead (only with `wiring.hangup_ends`).
 fn serve(
     device: &mut dyn BenchDevice,
     port: &mut TTYPort,
     options: &BenchOptions,
     wiring: &Wiring,
-) {
+) -> bool {
     let Wiring {
         frame_tx,
         stop,
         epoch,
         plug,
         probe,
+        hangup_ends,
     } = *wiring;
     let mut probing = false;
     // The device keeps recording once asked to: discard what nobody wants.
@@ -478,9 +563,14 @@ fn serve(
     let mut real_time = options.pacing == Pacing::RealTime;
     // Real time: simulated time = anchor_sim_s + anchor.elapsed().
     let mut anchor = Instant::now();
-    let mut anchor_sim_s = 0.0f64;
+    // A device served again after a hang-up carries on from its own time.
+    let mut anchor_sim_s = if real_time {
+        device.time_s().max(0.0)
+    } else {
+        0.0
+    };
     if real_time && let Ok(mut e) = epoch.lock() {
-        *e = Some(anchor);
+        *e = anchor.checked_sub(Duration::from_secs_f64(anchor_sim_s));
     }
     let mut buf = [0u8; 4096];
     let mut pending_out: Vec<u8> = Vec::new();
@@ -515,12 +605,14 @@ fn serve(
                 }
                 device.host_write(&buf[..n], now);
             }
+            Ok(_) if hangup_ends => return true,
             Ok(_) => {}
             Err(e)
                 if matches!(
                     e.kind(),
                     ErrorKind::TimedOut | ErrorKind::WouldBlock | ErrorKind::Interrupted
                 ) => {}
+            Err(_) if hangup_ends => return true,
             // EIO: no process has the slave open at the moment; carry on.
             Err(_) => {}
         }
@@ -594,4 +686,5 @@ fn serve(
             }
         }
     }
+    false
 }

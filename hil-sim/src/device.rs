@@ -45,6 +45,9 @@ pub struct SimFrame {
     pub height: usize,
     pub format: PixelFormat,
     pub data: Vec<u8>,
+    /// Ground truth: the contact radius the frame was rendered with (px, major semi-axis at
+    /// the 50 % level; 0 without contact). Never part of what a camera delivers.
+    pub truth_radius_px: f64,
     /// The exposure's centre on the host's monotonic clock, when the bench runs in real time
     /// (set by [`crate::bench`]; `None` from a bare [`SimDevice`]).
     pub captured_at: Option<std::time::Instant>,
@@ -572,6 +575,7 @@ impl SimDevice {
                 height: cam.height,
                 format: cam.format,
                 data,
+                truth_radius_px: scene.radius_px,
                 captured_at: None,
             });
         }

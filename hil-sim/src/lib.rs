@@ -20,6 +20,7 @@
 
 pub mod bench;
 pub mod camera;
+pub mod camera_out;
 pub mod device;
 pub mod effects;
 pub mod faults;
@@ -30,3 +31,4 @@ pub use pneumatic_plant as pneumatics;
 pub mod rng;
 pub mod scenario;
 pub mod sensors;
+pub mod v4l2_mmap_out;

@@ -110,3 +110,61 @@ fn a_client_on_the_pty_gets_its_handshake_and_frames_flow() {
     let stats = handle.stop();
     assert!(stats.ticks > 0 && stats.frames_rendered > 0);
 }
+
+/// `start_on_tty` serves a terminal that exists already (in use: the device side of a USB
+/// serial gadget); here the slave end of a pseudo-terminal, the test holding the master as
+/// the host's end of the cable.
+#[test]
+fn an_existing_terminal_is_served_in_raw_mode() {
+    use serialport::SerialPort;
+    let scenario = Scenario::parse(
+        "seed = 9\n[mechanics]\nsource = \"rigid\"\n",
+        Path::new("tty.toml"),
+    )
+    .unwrap();
+    let (mut master, slave) = serialport::TTYPort::pair().unwrap();
+    let path = slave.name().unwrap();
+    let device = hil_sim::device::SimDevice::new(scenario).unwrap();
+    let handle = hil_sim::bench::start_on_tty(
+        Box::new(device),
+        BenchOptions {
+            pacing: Pacing::Auto,
+            camera: false,
+            ..BenchOptions::default()
+        },
+        Path::new(&path),
+    )
+    .unwrap();
+    assert_eq!(handle.pty_path(), Path::new(&path));
+    master.set_timeout(Duration::from_millis(50)).unwrap();
+    master
+        .write_all(&frame(
+            1,
+            Request::Hello {
+                host_protocol_version: PROTOCOL_VERSION,
+            },
+        ))
+        .unwrap();
+    let mut decoder = FrameDecoder::<DeviceMessage>::new();
+    let mut buf = [0u8; 1024];
+    let mut info = None;
+    // the bench answers within a few ms; 10 s for a loaded machine
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while info.is_none() && Instant::now() < deadline {
+        let n = master.read(&mut buf).unwrap_or(0);
+        for m in decoder.push(&buf[..n]) {
+            if let Ok(DeviceMessage::Ack {
+                seq: 1,
+                reply: Reply::Info(i),
+            }) = m
+            {
+                info = Some(i);
+            }
+        }
+    }
+    let info = info.expect("Hello answered on the served terminal");
+    assert!(info.serial.starts_with("SIM-"));
+    assert!(handle.epoch().is_some(), "a host spoke: real time");
+    drop(slave);
+    handle.stop();
+}

@@ -7,6 +7,13 @@
 //! `hil-sim --run [--scenario FILE] [--seed N]` instead simulates the scenario's duration
 //! (its built-in programme, no host) as fast as possible and prints the timing.
 //!
+//! `--serve-tty PATH` serves an existing terminal instead (the device side of a USB serial
+//! gadget, `/dev/ttyGS0`: the host then talks to a real CDC-ACM port).
+//!
+//! `--camera-out /dev/videoN` writes the rendered frames to a V4L2 video output device
+//! (v4l2loopback, or vivid's output -> capture loop), where a host captures them as from a
+//! camera.
+//!
 //! `--firmware FILE.elf` puts the RP2040 binary, running in the emulated chip
 //! (`emulator/`, Node.js), in place of the library controller; `--unique-id HEX16` sets its
 //! flash's unique ID (the serial number it reports).
@@ -15,7 +22,8 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
 
-use hil_sim::bench::{BenchHandle, BenchOptions, Pacing, start, start_firmware};
+use hil_sim::bench::{BenchHandle, BenchOptions, Pacing, start, start_firmware, start_on_tty};
+use hil_sim::camera_out::CameraOut;
 use hil_sim::device::SimDevice;
 use hil_sim::firmware_emulation::{EmulatorConfig, FirmwareDevice};
 use hil_sim::scenario::Scenario;
@@ -29,10 +37,13 @@ struct Args {
     save_curves: Option<PathBuf>,
     firmware: Option<PathBuf>,
     unique_id: Option<[u8; 8]>,
+    serve_tty: Option<PathBuf>,
+    camera_out: Option<PathBuf>,
+    camera_truth: Option<PathBuf>,
     help: bool,
 }
 
-const USAGE: &str = "usage: hil-sim [--scenario FILE] [--seed N] [--pacing auto|realtime|fast] [--no-camera] [--run] [--save-curves DIR] [--firmware FILE.elf [--unique-id HEX16]]
+const USAGE: &str = "usage: hil-sim [--scenario FILE] [--seed N] [--pacing auto|realtime|fast] [--no-camera] [--run] [--save-curves DIR] [--firmware FILE.elf [--unique-id HEX16]] [--serve-tty PATH] [--camera-out /dev/videoN [--camera-truth FILE]]
 
 Serves the simulated bench on a pseudo-terminal (its path is printed) until killed.
   --scenario FILE   scenario TOML (default: the built-in gelatin sample on the shipped table)
@@ -44,6 +55,13 @@ Serves the simulated bench on a pseudo-terminal (its path is printed) until kill
   --firmware ELF    run this RP2040 firmware in the emulated chip (needs Node.js and
                     `npm ci` in emulator/) instead of the library controller
   --unique-id HEX16 the emulated flash's unique ID (the serial the firmware reports)
+  --serve-tty PATH  serve this existing terminal (raw mode) instead of a new pseudo-terminal,
+                    e.g. /dev/ttyGS0, the device side of a USB CDC-ACM gadget; reopened
+                    after a hang-up (the gadget's host went away)
+  --camera-out DEV  write the rendered frames to this V4L2 video output device (vivid's
+                    output -> capture loop, v4l2loopback) in the scenario's format and size
+  --camera-truth FILE  with --camera-out: one line per new frame published, `seq,time_us,
+                    radius_px` (the contact radius it was rendered with: ground truth)
   -h, --help        this text";
 
 fn parse_args() -> Result<Args, String> {
@@ -56,6 +74,9 @@ fn parse_args() -> Result<Args, String> {
         save_curves: None,
         firmware: None,
         unique_id: None,
+        serve_tty: None,
+        camera_out: None,
+        camera_truth: None,
         help: false,
     };
     let mut it = std::env::args().skip(1);
@@ -97,6 +118,16 @@ fn parse_args() -> Result<Args, String> {
                     parse_unique_id(&v)
                         .ok_or_else(|| format!("--unique-id: `{v}` is not 16 hex digits"))?,
                 );
+            }
+            "--serve-tty" => {
+                args.serve_tty = Some(it.next().ok_or("--serve-tty needs a terminal path")?.into());
+            }
+            "--camera-out" => {
+                args.camera_out =
+                    Some(it.next().ok_or("--camera-out needs a video device")?.into());
+            }
+            "--camera-truth" => {
+                args.camera_truth = Some(it.next().ok_or("--camera-truth needs a file")?.into());
             }
             "-h" | "--help" => args.help = true,
             other => return Err(format!("unknown argument `{other}` (try --help)")),
@@ -163,11 +194,23 @@ fn main() -> ExitCode {
             return run_firmware(device, built);
         }
         let options = BenchOptions {
-            pacing: args.pacing,
+            pacing: camera_pacing(&args),
             camera: args.camera,
             ..BenchOptions::default()
         };
-        return serve_until_killed(start_firmware(device, options));
+        let camera_out =
+            match open_camera_out(args.camera_out.as_deref(), device.plant().scenario()) {
+                Ok(c) => c,
+                Err(code) => return code,
+            };
+        return serve_until_killed(
+            match &args.serve_tty {
+                Some(path) => start_on_tty(Box::new(device), options, path),
+                None => start_firmware(device, options),
+            },
+            camera_out,
+            args.camera_truth.as_deref(),
+        );
     }
     if args.unique_id.is_some() {
         eprintln!("hil-sim: --unique-id needs --firmware");
@@ -204,17 +247,39 @@ fn main() -> ExitCode {
         );
         return ExitCode::SUCCESS;
     }
-    serve_until_killed(start(
-        scenario,
-        BenchOptions {
-            pacing: args.pacing,
-            camera: args.camera,
-            ..BenchOptions::default()
+    let options = BenchOptions {
+        pacing: camera_pacing(&args),
+        camera: args.camera,
+        ..BenchOptions::default()
+    };
+    let camera_out = match open_camera_out(args.camera_out.as_deref(), &scenario) {
+        Ok(c) => c,
+        Err(code) => return code,
+    };
+    serve_until_killed(
+        match &args.serve_tty {
+            Some(path) => SimDevice::new(scenario)
+                .and_then(|device| start_on_tty(Box::new(device), options, path)),
+            None => start(scenario, options),
         },
-    ))
+        camera_out,
+        args.camera_truth.as_deref(),
+    )
 }
 
-fn serve_until_killed(started: Result<BenchHandle, hil_sim::device::SimError>) -> ExitCode {
+fn serve_until_killed(
+    started: Result<BenchHandle, hil_sim::device::SimError>,
+    mut camera_out: Option<CameraOut>,
+    truth_path: Option<&std::path::Path>,
+) -> ExitCode {
+    use std::io::Write;
+    let mut truth = match truth_path.map(std::fs::File::create).transpose() {
+        Ok(f) => f.map(std::io::LineWriter::new),
+        Err(e) => {
+            eprintln!("hil-sim: --camera-truth: {e}");
+            return ExitCode::from(2);
+        }
+    };
     let handle = match started {
         Ok(h) => h,
         Err(e) => {
@@ -223,10 +288,86 @@ fn serve_until_killed(started: Result<BenchHandle, hil_sim::device::SimError>) -
         }
     };
     println!("{}", handle.pty_path().display());
-    // Serve until killed; frames go unconsumed (the in-process API hands them out).
+    // Serve until killed. Without --camera-out frames go unconsumed (the in-process API
+    // hands them out). With it the output is kept fed like a video link: the newest frame
+    // is queued whenever the driver hands a buffer back (a blocking dequeue paces this loop
+    // at the output's own frame rate), repeating the last frame when no new one has been
+    // rendered yet, since vivid's loop shows a test pattern whenever its output queue runs
+    // dry. A driver that returns buffers at once (v4l2loopback) gets a repeat at most every
+    // REPEAT_EVERY.
+    const REPEAT_EVERY: std::time::Duration = std::time::Duration::from_millis(10);
+    let mut latest: Option<hil_sim::device::SimFrame> = None;
+    let mut last_write = Instant::now();
     loop {
-        while handle.frames.try_recv().is_ok() {}
-        std::thread::sleep(std::time::Duration::from_millis(5));
+        let mut fresh = false;
+        while let Ok(frame) = handle.frames.try_recv() {
+            latest = Some(frame);
+            fresh = true;
+        }
+        let Some(out) = camera_out.as_mut() else {
+            std::thread::sleep(std::time::Duration::from_millis(5));
+            continue;
+        };
+        let Some(frame) = latest.as_ref() else {
+            std::thread::sleep(std::time::Duration::from_millis(2));
+            continue;
+        };
+        if !fresh && last_write.elapsed() < REPEAT_EVERY {
+            std::thread::sleep(REPEAT_EVERY.saturating_sub(last_write.elapsed()));
+            continue;
+        }
+        if fresh && let Some(t) = truth.as_mut() {
+            // ground truth for tests; a full disk must not stop the bench
+            let _ = writeln!(
+                t,
+                "{},{},{:.3}",
+                frame.seq, frame.timestamp_us, frame.truth_radius_px
+            );
+        }
+        if let Err(e) = out.write_frame(frame) {
+            // The device went away (driver unloaded or unbound): the bench goes on without
+            // a camera, as the controller does when the camera's cable is pulled.
+            eprintln!(
+                "hil-sim: camera output stopped after {} frames: {e}",
+                out.written
+            );
+            camera_out = None;
+        }
+        last_write = Instant::now();
+    }
+}
+
+/// `auto` pacing renders no frames until a host speaks on the serial port; a camera
+/// published with `--camera-out` is watched independently of the serial port (a host takes
+/// its no-contact reference frames from it), so it runs in real time from the start.
+fn camera_pacing(args: &Args) -> Pacing {
+    if args.camera_out.is_some() && args.pacing == Pacing::Auto {
+        Pacing::RealTime
+    } else {
+        args.pacing
+    }
+}
+
+/// Opens `--camera-out` in the scenario camera's format and size.
+fn open_camera_out(
+    path: Option<&std::path::Path>,
+    scenario: &Scenario,
+) -> Result<Option<CameraOut>, ExitCode> {
+    let Some(path) = path else {
+        return Ok(None);
+    };
+    let camera = &scenario.camera;
+    let (Ok(width), Ok(height)) = (u32::try_from(camera.width), u32::try_from(camera.height))
+    else {
+        eprintln!("hil-sim: camera size out of range");
+        return Err(ExitCode::from(2));
+    };
+    match CameraOut::open(path, camera.format, width, height) {
+        Ok(out) => Ok(Some(out)),
+        Err(e) => {
+            eprintln!("hil-sim: {e}");
+            Err(ExitCode::from(1))
+        }
     }
 }
 

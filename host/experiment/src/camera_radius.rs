@@ -32,8 +32,16 @@ pub fn capture_reference(
 }
 
 /// Radii measured on a worker thread from a frame source.
+/// Failed frames in a row after which a source counts as gone (a camera that was unplugged
+/// fails every dequeue at once; a single corrupt buffer or a late frame is not that).
+pub const LOST_AFTER_ERRORS: u32 = 5;
+
+/// Pause after a failed frame, so a source that fails at once is not polled in a busy loop.
+const ERROR_PAUSE: std::time::Duration = std::time::Duration::from_millis(20);
+
 pub struct CameraRadiusSource {
     from_worker: Receiver<Option<RadiusSample>>,
+    lost: Arc<std::sync::Mutex<Option<String>>>,
     stop: Arc<AtomicBool>,
     dropped: Arc<AtomicU64>,
     worker: Option<JoinHandle<()>>,
@@ -62,22 +70,37 @@ impl CameraRadiusSource {
         let stop = Arc::new(AtomicBool::new(false));
         let dropped = Arc::new(AtomicU64::new(0));
         let (stop_w, dropped_w) = (stop.clone(), dropped.clone());
+        let lost = Arc::new(std::sync::Mutex::new(None));
+        let lost_w = Arc::clone(&lost);
         let worker = std::thread::Builder::new()
             .name("camera-radius".into())
             .spawn(move || {
                 let mut last_seq: Option<u64> = None;
+                let mut errors_in_a_row = 0u32;
                 while !stop_w.load(Ordering::Relaxed) {
                     let frame = match source.next_frame() {
                         Ok(Some(f)) => f,
                         Ok(None) => return,
                         Err(e) => {
                             tracing::warn!("camera: {e}");
+                            errors_in_a_row += 1;
+                            if errors_in_a_row >= LOST_AFTER_ERRORS {
+                                if let Ok(mut l) = lost_w.lock() {
+                                    *l = Some(format!(
+                                        "{} ({errors_in_a_row} frames failed in a row)",
+                                        e
+                                    ));
+                                }
+                                return;
+                            }
                             if tx.send(None).is_err() {
                                 return;
                             }
+                            std::thread::sleep(ERROR_PAUSE);
                             continue;
                         }
                     };
+                    errors_in_a_row = 0;
                     if let Some(l) = last_seq {
                         dropped_w
                             .fetch_add(frame.sequence.saturating_sub(l + 1), Ordering::Relaxed);
@@ -105,6 +128,7 @@ impl CameraRadiusSource {
             })?;
         Ok(Self {
             from_worker,
+            lost,
             stop,
             dropped,
             worker: Some(worker),
@@ -133,6 +157,10 @@ impl RadiusSource for CameraRadiusSource {
         (self.unmeasured, self.dropped.load(Ordering::Relaxed))
     }
 
+    fn lost(&self) -> Option<String> {
+        self.lost.lock().ok().and_then(|l| l.clone())
+    }
+
     fn finish(&mut self, _clock: &ClockMap) -> Vec<RadiusSample> {
         self.stop.store(true, Ordering::Relaxed);
         // a live camera delivers its next frame within a frame period, then the worker
@@ -147,5 +175,69 @@ impl RadiusSource for CameraRadiusSource {
 impl Drop for CameraRadiusSource {
     fn drop(&mut self) {
         self.stop.store(true, Ordering::Relaxed);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use camera::{Frame, PixelFormat};
+    use std::time::{Duration, Instant};
+
+    /// Delivers `good` uniform frames, then fails every frame as an unplugged camera does.
+    struct Unplugged {
+        good: u64,
+        sent: u64,
+    }
+
+    impl FrameSource for Unplugged {
+        fn next_frame(&mut self) -> Result<Option<Frame>, CameraError> {
+            if self.sent >= self.good {
+                return Err(CameraError::Device {
+                    device: "/dev/video9".into(),
+                    message: "dequeue: No such device (os error 19)".into(),
+                });
+            }
+            self.sent += 1;
+            Ok(Some(Frame {
+                format: PixelFormat::Gray8,
+                width: 64,
+                height: 48,
+                sequence: self.sent,
+                host_time_us: host_clock::now_us(),
+                data: vec![100; 64 * 48],
+            }))
+        }
+
+        fn describe(&self) -> String {
+            "unplugged test source".into()
+        }
+    }
+
+    #[test]
+    fn a_camera_that_fails_every_frame_is_reported_lost_with_its_error() {
+        let reference = GrayImage::new(64, 48, vec![100; 64 * 48]).expect("reference");
+        let px = PxPerMmCalibration {
+            px_per_mm: 50.0,
+            px_per_mm_sigma: 0.0,
+            offset_px: None,
+            samples: 1,
+        };
+        let mut source = CameraRadiusSource::start(Unplugged { good: 3, sent: 0 }, reference, px)
+            .expect("start");
+        let clock = ClockMap::default();
+        let mut measured = 0;
+        // LOST_AFTER_ERRORS failures, ERROR_PAUSE apart: ~0.1 s; 10 s for a loaded machine
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while source.lost().is_none() && Instant::now() < deadline {
+            measured += source.poll(&clock).len();
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        measured += source.poll(&clock).len();
+        let why = source.lost().expect("the source is reported lost");
+        assert!(why.contains("/dev/video9"), "{why}");
+        assert!(why.contains("5 frames failed in a row"), "{why}");
+        assert_eq!(measured, 3, "the frames before the failure are kept");
+        assert_eq!(source.failures().0, u64::from(LOST_AFTER_ERRORS - 1));
     }
 }

@@ -21,6 +21,11 @@ pub trait RadiusSource {
     fn finish(&mut self, _clock: &link::ClockMap) -> Vec<RadiusSample> {
         Vec::new()
     }
+    /// Why the source stopped delivering frames for good (the camera unplugged, its driver
+    /// unloaded), once it has; the run then ends with [`ExperimentError::CameraLost`].
+    fn lost(&self) -> Option<String> {
+        None
+    }
 }
 
 /// What to do.
@@ -58,6 +63,8 @@ pub enum ExperimentError {
     DeviceSilent { port: String, silent_s: f64 },
     #[error("device fault during the experiment: flags {0:#06x}")]
     Fault(u16),
+    #[error("the camera stopped delivering frames: {0}; everything received is in the record")]
+    CameraLost(String),
 }
 
 /// What a run produced.
@@ -143,6 +150,11 @@ fn collect(
             .frames
             .append(&format!("{:.1},{:.5}", f.host_time_us, f.a_mm))?;
         frames_into.push(f);
+    }
+    if let Some(why) = radius.lost() {
+        streams.samples.flush()?;
+        streams.frames.flush()?;
+        return Err(ExperimentError::CameraLost(why));
     }
     if r.is_err() {
         streams.samples.flush()?;

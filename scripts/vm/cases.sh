@@ -1,0 +1,425 @@
+# The cases of the kernel-driver tier, sourced by /init inside the virtual machine (busybox
+# sh). Each case is a function `case_NAME`; `run NAME` runs it with its output in
+# /tmp/NAME.log and prints `VMTEST PASS NAME: detail` or `VMTEST FAIL NAME: detail`
+# followed by the log (each line prefixed with `  | `). A case sets its detail with
+# `detail TEXT`. Timeouts are generous: everything runs under TCG emulation (no KVM) on a
+# machine that may be busy, roughly 10-30x slower than native.
+
+GADGET=/sys/kernel/config/usb_gadget/tactile
+USB_SERIAL=E6614C311B4A7C2D
+HILSIM_LOG=/tmp/hil-sim.log
+HILSIM_PID=
+
+detail() { echo "$*" >/tmp/detail; }
+
+# `vmtest.cases=a,b` on the kernel command line (VM_CASES=a,b for scripts/vm-test.sh) runs
+# only those cases (and the ones they depend on must be listed too).
+ONLY=$(sed -n 's/.*vmtest\.cases=\([^ ]*\).*/,\1,/p' /proc/cmdline)
+
+run() {
+    name=$1
+    case "$ONLY" in "" | *",$name,"*) ;; *) return 0 ;; esac
+    run_case "$name"
+}
+
+# A case that is not part of the default run (see docs/testing.md): only with VM_CASES.
+run_listed() {
+    case "$ONLY" in *",$1,"*) run_case "$1" ;; esac
+}
+
+run_case() {
+    name=$1
+    : >/tmp/detail
+    t0=$(cut -d' ' -f1 /proc/uptime)
+    if "case_$name" >"/tmp/$name.log" 2>&1; then
+        result=PASS
+    else
+        result=FAIL
+    fi
+    t1=$(cut -d' ' -f1 /proc/uptime)
+    secs=$(awk "BEGIN { printf \"%.1f\", $t1 - $t0 }")
+    echo "VMTEST $result $name: $(cat /tmp/detail) (${secs} s)"
+    if [ "$result" = FAIL ]; then
+        lines=$(wc -l <"/tmp/$name.log")
+        if [ "$lines" -gt 40 ]; then
+            head -n 15 "/tmp/$name.log" | sed 's/^/  | /'
+            echo "  | ... ($((lines - 35)) lines)"
+            tail -n 20 "/tmp/$name.log" | sed 's/^/  | /'
+        else
+            sed 's/^/  | /' "/tmp/$name.log"
+        fi
+        echo "  | --- dmesg ---"
+        dmesg | tail -n 8 | sed 's/^/  | /'
+    fi
+}
+
+# Waits up to $2 seconds for the path $1 to exist.
+wait_for() {
+    i=0
+    while [ ! -e "$1" ]; do
+        i=$((i + 1))
+        [ "$i" -gt $(($2 * 10)) ] && return 1
+        sleep 0.1
+    done
+}
+
+# The controller's USB identity on a CDC-ACM gadget (configfs), bound to dummy_hcd's
+# device controller: the host side sees a USB device 1209:7ac7 and cdc-acm makes
+# /dev/ttyACM0 of it; /dev/ttyGS0 is the device side.
+gadget_create() {
+    mkdir "$GADGET" || return 1
+    echo 0x1209 >"$GADGET/idVendor"
+    echo 0x7ac7 >"$GADGET/idProduct"
+    echo 0x0200 >"$GADGET/bcdUSB"
+    mkdir "$GADGET/strings/0x409"
+    echo "$USB_SERIAL" >"$GADGET/strings/0x409/serialnumber"
+    echo "Video-tactile sensor project" >"$GADGET/strings/0x409/manufacturer"
+    echo "Tactile sensor controller" >"$GADGET/strings/0x409/product"
+    mkdir "$GADGET/configs/c.1"
+    mkdir "$GADGET/functions/acm.usb0" || return 1
+    ln -s "$GADGET/functions/acm.usb0" "$GADGET/configs/c.1/"
+}
+
+udc_name() { ls /sys/class/udc | head -n 1; }
+plug() { udc_name >"$GADGET/UDC"; }
+unplug() { echo "" >"$GADGET/UDC"; }
+
+# The host-side port of the controller (the first ttyACM with our serial number).
+acm_port() {
+    for d in /sys/class/tty/ttyACM*; do
+        [ -e "$d" ] || continue
+        if [ "$(cat "$d/device/../serial" 2>/dev/null)" = "$USB_SERIAL" ]; then
+            echo "/dev/${d##*/}"
+            return 0
+        fi
+    done
+    return 1
+}
+
+wait_acm() {
+    i=0
+    while ! acm_port >/dev/null; do
+        i=$((i + 1))
+        [ "$i" -gt $(($1 * 10)) ] && return 1
+        sleep 0.1
+    done
+}
+
+hilsim_start() {
+    hilsim_stop
+    hil-sim --serve-tty /dev/ttyGS0 "$@" >"$HILSIM_LOG" 2>&1 &
+    HILSIM_PID=$!
+    sleep 1
+    kill -0 "$HILSIM_PID" 2>/dev/null || { cat "$HILSIM_LOG"; return 1; }
+}
+
+hilsim_stop() {
+    if [ -n "$HILSIM_PID" ]; then
+        kill "$HILSIM_PID" 2>/dev/null
+        wait "$HILSIM_PID" 2>/dev/null
+    fi
+    HILSIM_PID=
+    return 0
+}
+
+# --- serial: the controller on a real CDC-ACM port --------------------------------------
+
+case_acm_enumerates() {
+    gadget_create || return 1
+    plug || return 1
+    # enumeration through dummy_hcd, usbcore and cdc-acm: ~1 s native, allow 60
+    wait_acm 60 || { ls /dev; return 1; }
+    wait_for /dev/ttyGS0 10 || return 1
+    port=$(acm_port)
+    dev=$(readlink -f "/sys/class/tty/${port#/dev/}/device/..")
+    detail "$port is $(cat "$dev/idVendor"):$(cat "$dev/idProduct") serial $(cat "$dev/serial"), driver $(basename "$(readlink "/sys/class/tty/${port#/dev/}/device/driver")")"
+    [ "$(cat "$dev/idVendor"):$(cat "$dev/idProduct")" = "1209:7ac7" ]
+}
+
+case_devices_lists_controller() {
+    tactile devices >/tmp/devices.txt 2>&1 || { cat /tmp/devices.txt; return 1; }
+    cat /tmp/devices.txt
+    port=$(acm_port)
+    grep -q "^  $port  usb usb 1209:7ac7 serial $USB_SERIAL \"Tactile sensor controller\"  <- tactile controller" /tmp/devices.txt || return 1
+    grep -q "1209:7ac7  tactile controller serial $USB_SERIAL" /tmp/devices.txt || return 1
+    detail "serial port $port and USB device 1209:7ac7 serial $USB_SERIAL listed"
+}
+
+case_calibrate_manometer() {
+    # no frames (rendering them takes most of a CPU under emulation, and nobody looks)
+    hilsim_start --no-camera || return 1
+    port=$(acm_port)
+    # a Hello, the vent, a few hundred samples: ~1 s native
+    timeout 120 tactile calibrate --dir /tmp/cal --json manometer --port "$port" >/tmp/cal.json || return 1
+    cat /tmp/cal.json
+    zero=$(sed -n 's/.*"manometer_zero_kpa": *\([-0-9.e]*\).*/\1/p' /tmp/cal.json | head -n 1)
+    serial=$(sed -n 's/.*"device_serial": *"\([^"]*\)".*/\1/p' /tmp/cal.json | head -n 1)
+    [ -n "$zero" ] && [ -n "$serial" ] || return 1
+    detail "round trip over $port: manometer zero $zero kPa, controller serial $serial"
+    # the zero of a vented shell is the sensor's offset: a fraction of a kPa
+    awk "BEGIN { exit !($zero > -2 && $zero < 2) }"
+}
+
+status_json() { tactile status --token-file /tmp/daemon.token --json 2>&1; }
+
+case_daemon_reconnects() {
+    [ -n "$HILSIM_PID" ] || hilsim_start --no-camera || return 1
+    port=$(acm_port)
+    tactile daemon --port "$port" --records /tmp/records --token-file /tmp/daemon.token \
+        >/tmp/daemon.log 2>&1 &
+    daemon_pid=$!
+    # connect: the daemon's start, a Hello and the stream: a few s under emulation
+    i=0
+    until status_json | grep -q '"connected": true'; do
+        i=$((i + 1))
+        [ "$i" -gt 120 ] && { status_json; cat /tmp/daemon.log; kill "$daemon_pid"; return 1; }
+        sleep 0.5
+    done
+    # Another program holding the port open keeps its name taken after the unplug (as a
+    # terminal left open on a real machine does), so the device comes back under another
+    # name and only its USB serial number leads the daemon to it.
+    sleep 600 <"$port" &
+    holder=$!
+    # the background shell opens the port when it gets to run: wait for that (10 s at most)
+    i=0
+    until [ "$(readlink "/proc/$holder/fd/0")" = "$port" ]; do
+        i=$((i + 1))
+        [ "$i" -gt 100 ] && { echo "could not hold $port open"; kill "$daemon_pid"; return 1; }
+        sleep 0.1
+    done
+    unplug
+    i=0
+    until status_json | grep -q '"connected": false'; do
+        i=$((i + 1))
+        [ "$i" -gt 60 ] && { status_json; kill "$daemon_pid" "$holder"; return 1; }
+        sleep 0.5
+    done
+    sleep 2
+    plug
+    wait_acm 60 || { kill "$daemon_pid"; return 1; }
+    i=0
+    until status_json | grep -q '"port_after": "/dev/ttyACM'; do
+        i=$((i + 1))
+        [ "$i" -gt 120 ] && { status_json; cat /tmp/daemon.log; kill "$daemon_pid"; return 1; }
+        sleep 0.5
+    done
+    status_json >/tmp/status.json
+    cat /tmp/status.json
+    kill "$daemon_pid" "$holder"
+    wait "$daemon_pid"
+    grep -q '"connected": true' /tmp/status.json || return 1
+    before=$(sed -n 's/.*"port_before": "\([^"]*\)".*/\1/p' /tmp/status.json)
+    after=$(sed -n 's/.*"port_after": "\([^"]*\)".*/\1/p' /tmp/status.json)
+    gap=$(sed -n 's/.*"gap_s": \([0-9.]*\).*/\1/p' /tmp/status.json)
+    detail "unplugged and replugged: reconnected by USB serial number, $before -> $after after a gap of $gap s"
+    [ -n "$before" ] && [ -n "$after" ] && [ "$before" != "$after" ]
+}
+
+# --- camera: hil-sim's frames through vivid's output -> capture loop ---------------------
+
+case_vivid_loop() {
+    # 640x480p59.94, the first of the CEA-861 presets, on the HDMI input and the HDMI
+    # output (the loop needs the same size and format on both), then the loop itself
+    v4l2-ctl -d /dev/video0 --set-dv-bt-timings index=0 || return 1
+    v4l2-ctl -d /dev/video1 --set-dv-bt-timings index=0 || return 1
+    v4l2-ctl -d /dev/video0 -c loop_video=1 || return 1
+    # no on-screen text (frame counter, control values) drawn over the looped frames
+    v4l2-ctl -d /dev/video0 -c osd_text_mode=2 || return 1
+    v4l2-ctl -d /dev/video0 --get-dv-timings
+    v4l2-ctl -d /dev/video0 --set-fmt-video=width=640,height=480,pixelformat=GREY || return 1
+    v4l2-ctl -d /dev/video0 --get-fmt-video | tee /tmp/fmt.txt
+    grep -q "Width/Height *: 640/480" /tmp/fmt.txt || return 1
+    grep -q "GREY" /tmp/fmt.txt || return 1
+    detail "$(cat /sys/class/video4linux/video0/name) -> video0 and video1 at 640x480, GREY offered, loop on"
+}
+
+# hil-sim's frames through vivid without a host on the serial port: a scenario whose own
+# programme switches the LED on and indents the sample; frames captured with v4l2-ctl
+# before and during contact, measured with `tactile radius`.
+case_camera_frames() {
+    cat >/tmp/frames.toml <<'TOML'
+name = "vm-frames"
+duration_s = 60.0
+[camera]
+fps = 30.0
+[[programme]]
+at_s = 0.0
+request = { SetLed = { duty_per_10k = 10000 } }
+[[programme]]
+at_s = 0.0
+request = { SetPressure = { setpoint_kpa = 6.0 } }
+[[programme]]
+at_s = 3.0
+indent_to_mm = 1.5
+speed_mm_per_s = 1.0
+TOML
+    hilsim_start --scenario /tmp/frames.toml --camera-out /dev/video1 --pacing realtime \
+        --camera-truth /tmp/truth.csv || return 1
+    # frames are published from the start; the indentation starts 3 s into the simulation
+    i=0
+    until [ -s /tmp/truth.csv ]; do
+        i=$((i + 1))
+        [ "$i" -gt 600 ] && { echo "no frame published in 60 s"; return 1; }
+        sleep 0.1
+    done
+    sleep 1
+    grab /tmp/ref.pgm || return 1
+    truth_ref=$(tail -n 1 /tmp/truth.csv | cut -d, -f3)
+    [ "$truth_ref" = 0.000 ] || { echo "reference frame rendered with contact ($truth_ref px)"; return 1; }
+    # The indentation ends 4.5 s into the simulation, which may lag the wall clock under
+    # emulation: wait until the rendered radius has stopped growing (120 s at most).
+    i=0
+    prev=x
+    while :; do
+        now=$(tail -n 1 /tmp/truth.csv | cut -d, -f3)
+        awk "BEGIN { exit !(\"$prev\" != \"x\" && $now > 0 && $now - $prev < 0.05) }" && break
+        prev=$now
+        i=$((i + 1))
+        [ "$i" -gt 120 ] && { echo "the contact did not settle: $now px"; return 1; }
+        sleep 1
+    done
+    truth_before=$(tail -n 1 /tmp/truth.csv | cut -d, -f3)
+    grab /tmp/contact.pgm || return 1
+    truth_after=$(tail -n 1 /tmp/truth.csv | cut -d, -f3)
+    hilsim_stop
+    for f in ref contact; do
+        echo "$f: middle row, every 16th pixel:"
+        od -A n -t u1 -v -w640 -j $((15 + 240 * 640)) -N 640 /tmp/$f.pgm | awk '{ for (i = 1; i <= NF; i += 16) printf "%s ", $i; print "" }'
+    done
+    cat "$HILSIM_LOG"
+    tactile radius /tmp/contact.pgm --reference /tmp/ref.pgm --json | tee /tmp/radius.json || return 1
+    r=$(sed -n 's/.*"radius_px": *\([0-9.]*\).*/\1/p' /tmp/radius.json | head -n 1)
+    detail "contact radius $r px through vivid, rendered with $truth_before .. $truth_after px"
+    [ -n "$r" ] && [ -n "$truth_before" ] && [ -n "$truth_after" ] || return 1
+    # The estimator's accuracy on rendered frames is a fraction of a pixel (the vision
+    # tests); 1 px allows for the noise of a single frame. The truth of the frames
+    # published just before and after the grab brackets the grabbed one (the pressure
+    # regulation still moves the contact by hundredths of a pixel).
+    awk "BEGIN { lo = $truth_before; hi = $truth_after; if (lo > hi) { t = lo; lo = hi; hi = t }
+        exit !(hi - lo < 0.5 && $r > lo - 1 && $r < hi + 1) }"
+}
+
+# One frame from vivid's capture node as a PGM file.
+grab() {
+    v4l2-ctl -d /dev/video0 --stream-mmap --stream-count=1 --stream-to=/tmp/grab.raw || return 1
+    printf 'P5\n640 480\n255\n' >"$1"
+    cat /tmp/grab.raw >>"$1"
+}
+
+# The proximity sensor, the manometer zero and the load tare on the rigid-sample bench,
+# stored as calibration records in /tmp/cal, as a bench engineer runs them.
+case_calibrate_rigid() {
+    # hil-sim's rigid-sample calibration bench with the measurement bench's seed (the seed
+    # draws the sensors' part-to-part spread: one seed is one physical instrument)
+    sed 's/^seed = .*/seed = 1/' /data/scenarios/rigid-calibration.toml >/tmp/rigid.toml
+    hilsim_start --no-camera --scenario /tmp/rigid.toml || return 1
+    port=$(acm_port)
+    timeout 180 tactile calibrate --dir /tmp/cal manometer --port "$port" || return 1
+    timeout 180 tactile calibrate --dir /tmp/cal load --port "$port" || return 1
+    # a 1.9 mm sweep at 0.5 mm/s in real time: ~5 s native
+    timeout 300 tactile calibrate --dir /tmp/cal --json proximity --port "$port" \
+        --pressure 6 --start 0.7 --end 2.6 --u-s-equals-h >/tmp/prox.json || return 1
+    grep -q '"p_air_kpa":6.0' /tmp/prox.json || { cat /tmp/prox.json; return 1; }
+    hilsim_stop
+    # The camera scale: the renderer's 50 px/mm (the disc calibration, `tactile calibrate
+    # camera`, reads image files and is tested on rendered discs in the default suite).
+    rec=$(ls /tmp/cal/calibration-*.json | tail -n 1)
+    sed -i 's/"px_per_mm": null/"px_per_mm": 50.0/' "$rec"
+    grep -q '"px_per_mm": 50.0' "$rec" || { cat "$rec"; return 1; }
+    detail "manometer, load and proximity (6 kPa) over $port; record $(basename "$rec")"
+}
+
+# The camera's driver unbound in the middle of a measurement: the run stops with an error
+# naming the camera, and the record written so far stays.
+case_camera_unplugged() {
+    [ -e /tmp/measure.toml ] || printf 'name = "vm-measure"\n[camera]\nfps = 30.0\n' >/tmp/measure.toml
+    hilsim_start --scenario /tmp/measure.toml --camera-out /dev/video1 || return 1
+    port=$(acm_port)
+    timeout 600 tactile measure --port "$port" --camera /dev/video0 --start 0.8 --repeats 3 \
+        --speed 1 --calibration-dir /tmp/cal --out /tmp/unplug --lut /data/default.lut \
+        >/tmp/unplug.out 2>&1 &
+    measure_pid=$!
+    # into the first indentation: the pressure set, the reference frames taken (~5 s native)
+    i=0
+    until grep -q '"load"' /tmp/unplug/curve.csv 2>/dev/null || [ -s /tmp/unplug/frames.csv ]; do
+        i=$((i + 1))
+        [ "$i" -gt 600 ] && break
+        sleep 0.2
+    done
+    sleep 2
+    echo vivid.0 >/sys/bus/platform/drivers/vivid/unbind || return 1
+    wait "$measure_pid"
+    rc=$?
+    echo "tactile measure exited $rc"
+    cat /tmp/unplug.out
+    ls -la /tmp/unplug
+    grep '"status"' -A 3 /tmp/unplug/meta.json
+    hilsim_stop
+    [ "$rc" -ne 0 ] || return 1
+    grep -q 'video0' /tmp/unplug.out || return 1
+    [ -f /tmp/unplug/meta.json ] && [ -f /tmp/unplug/samples.csv ] || return 1
+    detail "$(grep -o 'error: .*' /tmp/unplug.out | head -n 1 | cut -c1-240)"
+}
+
+# What a failed measurement left.
+measure_evidence() {
+    cat /tmp/measure.json "$HILSIM_LOG"
+    ls -la /tmp/measure
+    head -n 3 /tmp/measure/frames.csv
+    awk -F, 'NR > 1 && $2 > m { m = $2 } END { print NR - 1, "frames, largest radius", m }' /tmp/measure/frames.csv
+    awk -F, 'NR > 1 { if ($7 > m) m = $7; if (n == "" || $7 < n) n = $7 } END { print NR - 1, "samples, stage steps", n, "..", m }' /tmp/measure/samples.csv
+    sed -n '/"frames"/,/}/p' /tmp/measure/meta.json
+    awk -F, 'NR > 1 && $2 > 0 { print "first frame in contact at", $1; exit }' /tmp/measure/frames.csv
+    awk -F, 'NR > 1 && $7 > 1600 { print "stage past the surface at", $2; exit }' /tmp/measure/samples.csv
+    awk -F, 'NR > 1 && $2 > m { m = $2; t = $1 } END { print "largest radius at", t }' /tmp/measure/frames.csv
+    awk -F, 'NR > 1 && $7 > m { m = $7; t = $2 } END { print "deepest stage at", t }' /tmp/measure/samples.csv
+    v4l2-ctl -d /dev/video0 --stream-mmap --stream-count=1 --stream-to=/tmp/f.raw
+    echo "middle row of a captured frame (every 16th pixel):"
+    od -A n -t u1 -v -w640 -j $((240 * 640)) -N 640 /tmp/f.raw | awk '{ for (i = 1; i <= NF; i += 16) printf "%s ", $i; print "" }'
+
+}
+
+# A whole experiment: samples over /dev/ttyACM0, frames rendered by hil-sim, written to
+# vivid's output and captured from /dev/video0; the fitted modulus against the simulated
+# sample's (200 kPa, the default gelatin).
+case_measure() {
+    # the default bench with the camera at 30 fps: rendering 60 fps barely keeps up with
+    # real time under emulation (see hilsim_speed)
+    printf 'name = "vm-measure"\n[camera]\nfps = 30.0\n' >/tmp/measure.toml
+    hilsim_start --scenario /tmp/measure.toml --camera-out /dev/video1 || return 1
+    port=$(acm_port)
+    # two indentations of 1.7 mm at 1 mm/s plus settling: ~15 s native
+    timeout 600 tactile measure --port "$port" --camera /dev/video0 --start 0.8 --repeats 2 \
+        --speed 1 \
+        --calibration-dir /tmp/cal --out /tmp/measure --lut /data/default.lut --json \
+        >/tmp/measure.json || { measure_evidence; return 1; }
+    cat /tmp/measure.json
+    e2=$(sed -n 's/^{"modulus_kpa":\([0-9.]*\),.*/\1/p' /tmp/measure.json)
+    frames=$(sed -n 's/.*"frames":\([0-9]*\),.*/\1/p' /tmp/measure.json)
+    [ -n "$e2" ] || return 1
+    detail "E2 = $e2 kPa (simulated 200 kPa), $frames frames through vivid, record $(ls /tmp/measure | tr '\n' ' ')"
+    [ -f /tmp/measure/frames.csv ] && [ -f /tmp/measure/fit.json ] || return 1
+    awk "BEGIN { exit !($e2 > 190 && $e2 < 210) }"
+}
+
+# How fast hil-sim simulates here (a bench must keep up with real time): 5 s of the
+# default bench without a host, with and without rendering frames.
+case_hilsim_speed() {
+    printf 'name = "speed"\nduration_s = 5.0\n' >/tmp/speed.toml
+    hil-sim --run --no-camera --scenario /tmp/speed.toml >/tmp/speed1.txt || return 1
+    hil-sim --run --scenario /tmp/speed.toml >/tmp/speed2.txt || return 1
+    cat /tmp/speed1.txt /tmp/speed2.txt
+    detail "no camera: $(sed -n 's/.*(\([0-9.]*x real time\).*/\1/p' /tmp/speed1.txt), camera 60 fps: $(sed -n 's/.*(\([0-9.]*x real time\).*/\1/p' /tmp/speed2.txt)"
+}
+
+run hilsim_speed
+run acm_enumerates
+run devices_lists_controller
+run calibrate_manometer
+run daemon_reconnects
+run vivid_loop
+run camera_frames
+run calibrate_rigid
+run_listed measure
+run camera_unplugged
+hilsim_stop
