@@ -17,16 +17,9 @@
 use std::time::{Duration, Instant};
 
 use daemon::api::{Event, ExperimentRequest, Job, JobState};
-use daemon::sim::start_sim_daemon;
 use daemon::{Client, DaemonHandle};
 use protocol::{FrameDecoder, Request, RequestFrame};
-
-fn temp_dir(name: &str) -> std::path::PathBuf {
-    let d = std::env::temp_dir().join(format!("tactile-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
+use system_tests::{start_test_daemon, temp_dir};
 
 struct Bench {
     daemon: DaemonHandle,
@@ -71,15 +64,7 @@ fn calibrated(name: &str) -> Bench {
         let f = f.unwrap();
         std::fs::copy(f.path(), calibrations.join(f.file_name())).unwrap();
     }
-    let token_file = dir.join("token");
-    let daemon = start_sim_daemon(
-        None,
-        "127.0.0.1:0".parse().unwrap(),
-        &dir.join("records"),
-        &token_file,
-        2000,
-    )
-    .unwrap();
+    let (daemon, token_file) = start_test_daemon(&dir, 2000);
     let client = Client::from_token_file(&daemon.addr.to_string(), &token_file).unwrap();
     let t0 = Instant::now();
     while !client.status().unwrap().connected {

@@ -21,13 +21,7 @@ use std::time::{Duration, Instant};
 use daemon::Client;
 use daemon::listener::HEADER_READ_TIMEOUT;
 use daemon::sim::start_sim_daemon_capped;
-
-fn temp_dir(name: &str) -> std::path::PathBuf {
-    let d = std::env::temp_dir().join(format!("tactile-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
+use system_tests::temp_dir;
 
 struct Daemon {
     handle: daemon::DaemonHandle,

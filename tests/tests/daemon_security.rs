@@ -10,17 +10,10 @@ use std::io::{Read, Write};
 use std::time::{Duration, Instant};
 
 use daemon::Client;
-use daemon::sim::start_sim_daemon;
+use system_tests::{start_test_daemon, temp_dir};
 
 /// A refused-body case: path, body, extra headers, expected status.
 type BodyCase<'a> = (&'a str, &'a str, &'a [(&'a str, &'a str)], u16);
-
-fn temp_dir(name: &str) -> std::path::PathBuf {
-    let d = std::env::temp_dir().join(format!("tactile-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
 
 /// One request written by hand, so every header is exactly what we say.
 fn raw_http(addr: &str, request: &str) -> u16 {
@@ -36,15 +29,7 @@ fn raw_http(addr: &str, request: &str) -> u16 {
 #[test]
 fn refused_requests_change_nothing() {
     let dir = temp_dir("daemon-security");
-    let token_file = dir.join("token");
-    let daemon = start_sim_daemon(
-        None,
-        "127.0.0.1:0".parse().unwrap(),
-        &dir.join("records"),
-        &token_file,
-        500,
-    )
-    .unwrap();
+    let (daemon, token_file) = start_test_daemon(&dir, 500);
     assert!(daemon.token_created);
     let addr = daemon.addr.to_string();
     let client = Client::from_token_file(&addr, &token_file).unwrap();

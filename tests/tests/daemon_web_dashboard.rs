@@ -13,13 +13,7 @@ use std::time::{Duration, Instant};
 
 use daemon::Client;
 use daemon::sim::start_sim_daemon;
-
-fn temp_dir(name: &str) -> std::path::PathBuf {
-    let d = std::env::temp_dir().join(format!("tactile-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
+use system_tests::{start_test_daemon, temp_dir};
 
 /// An answer: status, headers (names lower case) and body.
 struct Answer {
@@ -79,15 +73,7 @@ fn request(addr: &str, method: &str, path: &str, headers: &[(&str, &str)], body:
 #[test]
 fn login_cookie_csrf_and_assets() {
     let dir = temp_dir("daemon-web-dashboard");
-    let token_file = dir.join("token");
-    let daemon = start_sim_daemon(
-        None,
-        "127.0.0.1:0".parse().unwrap(),
-        &dir.join("records"),
-        &token_file,
-        500,
-    )
-    .unwrap();
+    let (daemon, token_file) = start_test_daemon(&dir, 500);
     let addr = daemon.addr.to_string();
     let client = Client::from_token_file(&addr, &token_file).unwrap();
     let t0 = Instant::now();
