@@ -116,6 +116,7 @@ impl CameraRadiusSource {
                                 (Some(d), true) => px_per_mm.px_to_mm(d.radius_px).max(0.0),
                                 _ => 0.0,
                             },
+                            device_time_us: None,
                         });
                     if tx.send(measured).is_err() {
                         return;

@@ -335,7 +335,27 @@ pub fn run_indentation(
     }
     streams.samples.flush()?;
     streams.frames.flush()?;
-    // 4. pair per cycle
+    // 4. pair per cycle. Frames stamped on the device's clock (the simulated bench's
+    // camera) are placed with the samples through one clock map, the final one: the link
+    // refits its map at every ping, and a device clock that does not keep a steady rate
+    // against the host's (a simulated bench falling behind the wall clock) moves it by up
+    // to hundreds of ms during a run, so samples and frames mapped at different moments
+    // would no longer line up. Host-stamped frames (a real camera) keep the samples' times
+    // as mapped on arrival.
+    if frames.iter().any(|f| f.device_time_us.is_some()) {
+        let clock = link.clock().clone();
+        let remap = |device_us: f64| clock.device_to_host_us(device_us.max(0.0).round() as u64);
+        for s in samples.iter_mut() {
+            if let Some(t) = remap(s.sample.device_time_us as f64) {
+                s.host_time_us = t;
+            }
+        }
+        for f in frames.iter_mut() {
+            if let Some(t) = f.device_time_us.and_then(remap) {
+                f.host_time_us = t;
+            }
+        }
+    }
     let disp: Vec<DisplacementSample> = samples
         .iter()
         .filter_map(|s| displacement(link, s, proximity, manometer_zero_kpa))

@@ -26,6 +26,10 @@ pub struct DisplacementSample {
 pub struct RadiusSample {
     pub host_time_us: f64,
     pub a_mm: f64,
+    /// The exposure on the device's clock, for sources stamped there (the simulated
+    /// bench's camera); `None` for a camera stamped on the host clock. Pairing maps it to
+    /// host time with the same clock map as the samples.
+    pub device_time_us: Option<f64>,
 }
 
 /// A paired point of the a–u_s curve.
@@ -137,6 +141,7 @@ mod tests {
             .map(|(i, &a_mm)| RadiusSample {
                 host_time_us: 500.0 + i as f64 * 10_000.0,
                 a_mm,
+                device_time_us: None,
             })
             .collect();
         let pts = pair_frames(&samples, &frames, 5000.0, 0.0);
@@ -164,6 +169,7 @@ mod tests {
             .map(|k| RadiusSample {
                 host_time_us: 250.0 + k as f64 * 50_000.0,
                 a_mm: 1.0,
+                device_time_us: None,
             })
             .collect();
         let pts = pair_frames(&samples, &frames, 5000.0, 0.0);
@@ -205,14 +211,17 @@ mod tests {
             RadiusSample {
                 host_time_us: 500.0,
                 a_mm: 1.0,
+                device_time_us: None,
             },
             RadiusSample {
                 host_time_us: 50_000.0,
                 a_mm: 1.0,
+                device_time_us: None,
             },
             RadiusSample {
                 host_time_us: 200_000.0,
                 a_mm: 1.0,
+                device_time_us: None,
             },
         ];
         let pts = pair_frames(&samples, &frames, 5000.0, 0.0);

@@ -171,10 +171,12 @@ impl<'b> SimRadiusSource<'b> {
                                 (Some(d), true) => px_per_mm.px_to_mm(d.radius_px).max(0.0),
                                 _ => 0.0,
                             };
+                            let device_us = frame_device_us(&clock, &f);
                             RadiusSample {
-                                // device time here; mapped to host time in `poll`
-                                host_time_us: frame_device_us(&clock, &f),
+                                // device time until `poll` maps it to host time
+                                host_time_us: device_us,
                                 a_mm,
+                                device_time_us: Some(device_us),
                             }
                         });
                     if worker_tx.send(measured).is_err() {
@@ -215,7 +217,7 @@ fn to_host(clock: &ClockMap, r: RadiusSample) -> Option<RadiusSample> {
     let host = clock.device_to_host_us(r.host_time_us.max(0.0).round() as u64)?;
     Some(RadiusSample {
         host_time_us: host,
-        a_mm: r.a_mm,
+        ..r
     })
 }
 
