@@ -22,6 +22,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .map(str::parse)
         .collect::<Result<_, _>>()?;
     let level: i32 = args.get(3).map_or(Ok(0), |s| s.parse())?;
+    // Gauss points per slave edge (0: node-to-segment, the production contact)
+    let points_per_edge: usize = args.get(4).map_or(Ok(0), |s| s.parse())?;
     let params = CurveParams {
         sample_modulus_kpa: modulus,
         pressure_kpa: pressure,
@@ -36,6 +38,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let mut settings = SolverSettings::for_level(level);
         settings.mesh = MeshSpec::with_edge_refinement(level, k);
         settings.penetration_tolerance_mm = 5e-4 * settings.mesh.sample_fine_size_mm;
+        if points_per_edge > 0 {
+            settings.contact_passes =
+                fem_core::problem::ContactPasses::SampleEdgeQuadrature { points_per_edge };
+        }
         let curve = fem_core::solve_curve_with(&params, &settings)?;
         let at = |h: f64| {
             curve

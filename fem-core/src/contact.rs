@@ -185,6 +185,101 @@ pub fn smooth_ramp(s: f64, d: f64) -> (f64, f64) {
     }
 }
 
+/// A point of the slave surface where the contact constraint is enforced, as a
+/// combination of slave nodes: `x = sum_i w_i x_{n_i}`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SlavePoint {
+    /// (node, weight) pairs.
+    pub nodes: Vec<(usize, f64)>,
+}
+
+impl SlavePoint {
+    /// Map a term computed for a virtual slave node at this point (dofs: the point's x, z,
+    /// then `seg_nodes`) to the point's nodes: with `x = sum w_i x_i` the chain rule gives
+    /// `r_i = w_i r_s` and `K_ij = w_i w_j K_ss`, `K_im = w_i K_sm` (exact: the weights are
+    /// constants). Returns (nodes, residual, tangent) with the point's nodes first.
+    fn expand(
+        &self,
+        seg_nodes: &[usize],
+        residual: &[f64],
+        tangent: &[f64],
+        with_tangent: bool,
+    ) -> (Vec<usize>, Vec<f64>, Vec<f64>) {
+        let np = self.nodes.len();
+        let m = seg_nodes.len();
+        let n_in = 2 + 2 * m;
+        let n_out = 2 * np + 2 * m;
+        let mut nodes: Vec<usize> = self.nodes.iter().map(|&(n, _)| n).collect();
+        nodes.extend_from_slice(seg_nodes);
+        // source dof of each output dof and its weight
+        let map = |a: usize| -> (usize, f64) {
+            if a < 2 * np {
+                (a % 2, self.nodes[a / 2].1)
+            } else {
+                (a - 2 * np + 2, 1.0)
+            }
+        };
+        let res: Vec<f64> = (0..n_out)
+            .map(|a| {
+                let (sa, wa) = map(a);
+                wa * residual[sa]
+            })
+            .collect();
+        let mut tan = Vec::new();
+        if with_tangent && !tangent.is_empty() {
+            tan = vec![0.0; n_out * n_out];
+            for a in 0..n_out {
+                let (sa, wa) = map(a);
+                for b in 0..n_out {
+                    let (sb, wb) = map(b);
+                    tan[a * n_out + b] = wa * wb * tangent[sa * n_in + sb];
+                }
+            }
+        }
+        (nodes, res, tan)
+    }
+}
+
+/// Quadratic edge shape functions (corner, mid-side, corner) on t in [-1, 1] and their
+/// derivatives.
+fn quadratic_edge_shape(t: f64) -> ([f64; 3], [f64; 3]) {
+    (
+        [0.5 * t * (t - 1.0), 1.0 - t * t, 0.5 * t * (t + 1.0)],
+        [t - 0.5, -2.0 * t, t + 0.5],
+    )
+}
+
+/// Gauss–Legendre points and weights on [-1, 1] (Newton's method on the Legendre
+/// polynomial from the asymptotic first guess; exact to round-off for n <= 64).
+pub fn gauss_legendre(n: usize) -> (Vec<f64>, Vec<f64>) {
+    let mut x = vec![0.0; n];
+    let mut w = vec![0.0; n];
+    for i in 0..n {
+        let mut t = (PI * (i as f64 + 0.75) / (n as f64 + 0.5)).cos();
+        let mut dp = 1.0;
+        for _ in 0..100 {
+            // P_n(t) and P_n'(t) by the three-term recurrence
+            let (mut p0, mut p1) = (1.0, t);
+            for k in 2..=n {
+                let p2 = ((2 * k - 1) as f64 * t * p1 - (k - 1) as f64 * p0) / k as f64;
+                p0 = p1;
+                p1 = p2;
+            }
+            let pn = if n == 0 { 1.0 } else { p1 };
+            let pm = if n == 1 { 1.0 } else { p0 };
+            dp = n as f64 * (t * pn - pm) / (t * t - 1.0);
+            let step = pn / dp;
+            t -= step;
+            if step.abs() < 1e-16 {
+                break;
+            }
+        }
+        x[n - 1 - i] = t;
+        w[n - 1 - i] = 2.0 / ((1.0 - t * t) * dp * dp);
+    }
+    (x, w)
+}
+
 /// Tributary surface areas (2 pi r weighted, mm^2) of the nodes of a polyline: each node
 /// gets the halves of its adjacent segments.
 pub fn tributary_areas(points: &[[f64; 2]]) -> Vec<f64> {
@@ -204,6 +299,9 @@ pub fn tributary_areas(points: &[[f64; 2]]) -> Vec<f64> {
 #[derive(Debug, Clone)]
 pub struct ContactTerm {
     pub slave_index: usize,
+    /// Shape-function weights of the slave point's nodes, which are the first
+    /// `slave_weights.len()` entries of `nodes` (one weight 1 for node-to-segment).
+    pub slave_weights: Vec<f64>,
     pub nodes: Vec<usize>,
     pub normal_force: f64,
     pub gap_mm: f64,
@@ -219,15 +317,19 @@ pub struct ContactTerm {
 pub struct ContactPair {
     /// Slave nodes (sample top) from the axis outwards.
     pub slaves: Vec<usize>,
+    /// Points of the slave surface where the constraint is enforced: the slave nodes
+    /// (node-to-segment) or quadrature points of the slave edges (see
+    /// [`Self::with_edge_quadrature`]), from the axis outwards.
+    pub points: Vec<SlavePoint>,
     /// Master nodes (shell outer surface), ordered so the outward normal points out of
     /// the master body.
     pub masters: Vec<usize>,
     segments: Vec<Segment>,
-    /// Reference tributary areas of the slave nodes.
+    /// Reference surface area (2 pi r weighted, mm^2) each slave point stands for.
     pub slave_areas_mm2: Vec<f64>,
     /// Penalty parameter (kPa/mm).
     pub penalty_kpa_per_mm: f64,
-    /// Augmented-Lagrangian multipliers (force, mN) per slave node.
+    /// Augmented-Lagrangian multipliers (force, mN) per slave point.
     pub multipliers: Vec<f64>,
     /// Gap width (mm) over which the force law is smoothed.
     pub smoothing_gap_mm: f64,
@@ -312,6 +414,8 @@ fn build_segments(masters: &[usize], nodes: &[[f64; 2]]) -> Vec<Segment> {
 }
 
 impl ContactPair {
+    /// Node-to-segment contact: every slave node is a constraint point with its tributary
+    /// area ([`tributary_areas`]).
     pub fn new(
         slaves: Vec<usize>,
         masters: Vec<usize>,
@@ -320,11 +424,88 @@ impl ContactPair {
         smoothing_gap_mm: f64,
     ) -> Self {
         let pts: Vec<[f64; 2]> = slaves.iter().map(|&n| nodes[n]).collect();
-        let slave_areas_mm2 = tributary_areas(&pts);
-        let n = slaves.len();
+        let areas = tributary_areas(&pts);
+        let points = slaves
+            .iter()
+            .map(|&n| SlavePoint {
+                nodes: vec![(n, 1.0)],
+            })
+            .collect();
+        Self::from_points(
+            slaves,
+            points,
+            areas,
+            masters,
+            nodes,
+            penalty,
+            smoothing_gap_mm,
+        )
+    }
+
+    /// Gauss-point-to-segment contact: the slave nodes are those of quadratic edges
+    /// (nodes `2e, 2e + 1, 2e + 2` of `slaves` form edge e), and the constraint is
+    /// enforced at `points_per_edge` Gauss–Legendre points of every edge, each standing
+    /// for its quadrature weight of the edge's reference area `int 2 pi r ds`. The
+    /// contact force of a point is distributed to the edge's nodes by the quadratic shape
+    /// functions (Wriggers, "Computational Contact Mechanics", sec. 9.1: the
+    /// Gauss-point-to-segment integration of the penalty term). Unlike nodes, the
+    /// points enter contact a fraction of an element at a time, so the contact edge
+    /// moves through an element continuously instead of node by node.
+    pub fn with_edge_quadrature(
+        slaves: Vec<usize>,
+        masters: Vec<usize>,
+        nodes: &[[f64; 2]],
+        penalty: f64,
+        smoothing_gap_mm: f64,
+        points_per_edge: usize,
+    ) -> Self {
+        let (xi, wq) = gauss_legendre(points_per_edge.max(1));
+        let mut points = Vec::new();
+        let mut areas = Vec::new();
+        for e in 0..slaves.len().saturating_sub(1) / 2 {
+            let en = [slaves[2 * e], slaves[2 * e + 1], slaves[2 * e + 2]];
+            let x = en.map(|n| nodes[n]);
+            for (&t, &w) in xi.iter().zip(&wq) {
+                let (shape, dshape) = quadratic_edge_shape(t);
+                let mut pos = [0.0; 2];
+                let mut tangent = [0.0; 2];
+                for k in 0..3 {
+                    for i in 0..2 {
+                        pos[i] += shape[k] * x[k][i];
+                        tangent[i] += dshape[k] * x[k][i];
+                    }
+                }
+                areas.push(2.0 * PI * pos[0] * tangent[0].hypot(tangent[1]) * w);
+                points.push(SlavePoint {
+                    nodes: (0..3).map(|k| (en[k], shape[k])).collect(),
+                });
+            }
+        }
+        Self::from_points(
+            slaves,
+            points,
+            areas,
+            masters,
+            nodes,
+            penalty,
+            smoothing_gap_mm,
+        )
+    }
+
+    fn from_points(
+        slaves: Vec<usize>,
+        points: Vec<SlavePoint>,
+        slave_areas_mm2: Vec<f64>,
+        masters: Vec<usize>,
+        nodes: &[[f64; 2]],
+        penalty: f64,
+        smoothing_gap_mm: f64,
+    ) -> Self {
+        let n = points.len();
         let segments = build_segments(&masters, nodes);
         Self {
             slaves,
+            points,
             masters,
             segments,
             slave_areas_mm2,
@@ -336,6 +517,17 @@ impl ContactPair {
             unsymmetric_friction: true,
             previous_coordinate: vec![None; n],
         }
+    }
+
+    /// Current position of slave point `s`.
+    pub fn point_position(&self, s: usize, position: &dyn Fn(usize) -> [f64; 2]) -> [f64; 2] {
+        let mut x = [0.0; 2];
+        for &(n, w) in &self.points[s].nodes {
+            let p = position(n);
+            x[0] += w * p[0];
+            x[1] += w * p[1];
+        }
+        x
     }
 
     /// Regularised Coulomb friction (Wriggers sec. 5.2, viscous-type regularisation of the
@@ -391,12 +583,9 @@ impl ContactPair {
     /// Record every slave's closest-point surface coordinate at a converged state (the
     /// reference of the next step's slip increments).
     pub fn commit_slip_state(&mut self, position: &dyn Fn(usize) -> [f64; 2]) {
-        let coords: Vec<Option<f64>> = self
-            .slaves
-            .iter()
-            .enumerate()
-            .map(|(s, &slave)| {
-                let (e, g) = self.project(position(slave), position)?;
+        let coords: Vec<Option<f64>> = (0..self.points.len())
+            .map(|s| {
+                let (e, g) = self.project(self.point_position(s, position), position)?;
                 let stiff = self.penalty_kpa_per_mm * self.slave_areas_mm2[s];
                 let (f, _) = smooth_ramp(
                     self.multipliers[s] - stiff * g.gap_mm,
@@ -480,8 +669,8 @@ impl ContactPair {
         with_tangent: bool,
     ) -> Vec<ContactTerm> {
         let mut terms = Vec::new();
-        for (s, &slave) in self.slaves.iter().enumerate() {
-            let xs = position(slave);
+        for s in 0..self.points.len() {
+            let xs = self.point_position(s, position);
             let Some((e, _)) = self.project(xs, position) else {
                 continue;
             };
@@ -532,10 +721,11 @@ impl ContactPair {
                     }
                 }
             }
-            let mut nodes = vec![slave];
-            nodes.extend_from_slice(&seg.nodes);
+            let (nodes, residual, tangent) =
+                self.points[s].expand(&seg.nodes, &residual, &tangent, with_tangent);
             terms.push(ContactTerm {
                 slave_index: s,
+                slave_weights: self.points[s].nodes.iter().map(|&(_, w)| w).collect(),
                 nodes,
                 normal_force: force,
                 gap_mm: g.gap_mm,
@@ -585,11 +775,13 @@ impl ContactPair {
         pairs
     }
 
-    /// Signed gap of every slave node (None where it projects on no segment).
+    /// Signed gap of every slave point (None where it projects on no segment).
     pub fn slave_gaps(&self, position: &dyn Fn(usize) -> [f64; 2]) -> Vec<Option<f64>> {
-        self.slaves
-            .iter()
-            .map(|&s| self.project(position(s), position).map(|(_, g)| g.gap_mm))
+        (0..self.points.len())
+            .map(|s| {
+                self.project(self.point_position(s, position), position)
+                    .map(|(_, g)| g.gap_mm)
+            })
             .collect()
     }
 
@@ -729,6 +921,63 @@ mod tests {
                 "H[{m}][{m}]"
             );
         }
+    }
+
+    #[test]
+    fn gauss_legendre_integrates_polynomials_exactly() {
+        for n in 1..=8 {
+            let (x, w) = gauss_legendre(n);
+            assert!(x.windows(2).all(|p| p[1] > p[0]));
+            // exact for degree <= 2n - 1: int_{-1}^{1} t^d dt = 2 / (d + 1) for even d
+            for d in 0..2 * n {
+                let q: f64 = x.iter().zip(&w).map(|(t, w)| w * t.powi(d as i32)).sum();
+                let exact = if d % 2 == 0 {
+                    2.0 / (d + 1) as f64
+                } else {
+                    0.0
+                };
+                assert!(
+                    (q - exact).abs() < 1e-13,
+                    "n {n}, degree {d}: {q} vs {exact}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn edge_quadrature_areas_sum_to_the_disc_area_and_points_lie_on_the_edges() {
+        let nodes: Vec<[f64; 2]> = (0..=10).map(|k| [0.3 * k as f64, 0.0]).collect();
+        let pair =
+            ContactPair::with_edge_quadrature((0..=10).collect(), vec![], &nodes, 1.0, 0.0, 3);
+        assert_eq!(pair.points.len(), 5 * 3);
+        let total: f64 = pair.slave_areas_mm2.iter().sum();
+        // 3 Gauss points integrate 2 pi r |dx/dt| (degree 1) exactly
+        assert!((total - PI * 3.0 * 3.0).abs() < 1e-12);
+        let pos = |n: usize| nodes[n];
+        for s in 0..pair.points.len() {
+            let x = pair.point_position(s, &pos);
+            let weights: f64 = pair.points[s].nodes.iter().map(|p| p.1).sum();
+            assert!((weights - 1.0).abs() < 1e-14 && x[1] == 0.0);
+            assert!((0.0..=3.0).contains(&x[0]));
+        }
+    }
+
+    #[test]
+    fn expanded_point_term_is_the_chain_rule_of_the_node_term() {
+        // a point with weights (w0, w1, w2): residual w_i r_s, tangent w_i w_j K_ss
+        let point = SlavePoint {
+            nodes: vec![(7, -0.1), (8, 0.8), (9, 0.3)],
+        };
+        let residual = [1.0, 2.0, 3.0, 4.0];
+        let tangent: Vec<f64> = (0..16).map(|k| k as f64).collect();
+        let (nodes, r, k) = point.expand(&[4], &residual, &tangent, true);
+        assert_eq!(nodes, vec![7, 8, 9, 4]);
+        assert_eq!(r, vec![-0.1, -0.2, 0.8, 1.6, 0.3, 0.6, 3.0, 4.0]);
+        let n = 8;
+        // K(node 8 z, node 9 x) = 0.8 * 0.3 * K_ss(z, x); K(node 7 x, master z) = -0.1 K_sm
+        assert!((k[3 * n + 4] - 0.8 * 0.3 * tangent[4]).abs() < 1e-15);
+        assert!((k[7] - (-0.1) * tangent[3]).abs() < 1e-15);
+        assert_eq!(k[6 * n + 7], tangent[2 * 4 + 3]);
     }
 
     #[test]

@@ -110,6 +110,10 @@ pub enum ContactPasses {
     ShellSlave,
     /// Both (two-pass node-to-segment).
     TwoPass,
+    /// The sample's top against the shell's surface, enforced at `points_per_edge`
+    /// Gauss points of every quadratic edge of the sample's top (Gauss-point-to-segment,
+    /// see `ContactPair::with_edge_quadrature`).
+    SampleEdgeQuadrature { points_per_edge: usize },
 }
 
 /// Production refinement of the elements along the contact surfaces relative to the
@@ -367,7 +371,17 @@ impl Indentation {
             let mut masters = shell.outer_surface.clone();
             masters.reverse();
             let smoothing = settings.contact_smoothing * settings.mesh.sample_fine_size_mm;
-            if settings.contact_passes != ContactPasses::ShellSlave {
+            if let ContactPasses::SampleEdgeQuadrature { points_per_edge } = settings.contact_passes
+            {
+                model.contacts.push(ContactPair::with_edge_quadrature(
+                    s.top.clone(),
+                    masters.clone(),
+                    &model.mesh.nodes,
+                    penalty,
+                    smoothing,
+                    points_per_edge,
+                ));
+            } else if settings.contact_passes != ContactPasses::ShellSlave {
                 model.contacts.push(ContactPair::new(
                     s.top.clone(),
                     masters,
@@ -376,7 +390,9 @@ impl Indentation {
                     smoothing,
                 ));
             }
-            if settings.contact_passes != ContactPasses::SampleSlave {
+            if settings.contact_passes == ContactPasses::ShellSlave
+                || settings.contact_passes == ContactPasses::TwoPass
+            {
                 // second pass: the shell's outer surface (apex to equator) as slave on the
                 // sample's top (axis outwards: outward normal +z, out of the sample)
                 model.contacts.push(ContactPair::new(
@@ -560,8 +576,8 @@ impl Indentation {
                             load_mn += term.residual[2 * i + 1];
                         }
                         if let Some(t) = top_index(n) {
-                            forces[t] += if i == 0 {
-                                term.normal_force
+                            forces[t] += if let Some(w) = term.slave_weights.get(i) {
+                                w * term.normal_force
                             } else {
                                 term.residual[2 * i].hypot(term.residual[2 * i + 1])
                             };
@@ -576,7 +592,7 @@ impl Indentation {
                         Some(g) => contact.multipliers[s] / contact.slave_areas_mm2[s] - eps * g,
                         None => f64::NEG_INFINITY,
                     };
-                    profile.push((pos(contact.slaves[s]), g, -q / eps, q));
+                    profile.push((contact.point_position(s, &pos), g, -q / eps, q));
                 }
             }
             profile.sort_by(|a, b| a.0[0].total_cmp(&b.0[0]));
