@@ -9,8 +9,7 @@
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use fem_core::linear_solver::SymmetricSolver;
-use fem_core::problem::solve_curve_state;
-use fem_core::{CurveParams, SolverSettings};
+use fem_core::{CurveParams, Simulation};
 
 fn solver(c: &mut Criterion) {
     let params = CurveParams {
@@ -18,9 +17,8 @@ fn solver(c: &mut Criterion) {
         steps: 20,
         ..Default::default()
     };
-    let settings = SolverSettings::for_level(0);
-    let (_, ind, state) = match solve_curve_state(&params, &settings) {
-        Ok(s) => s,
+    let (ind, state) = match Simulation::new(&params).solve() {
+        Ok(s) => (s.indentation, s.displacement),
         Err(e) => panic!("set-up solve failed: {e}"),
     };
     let p = params.pressure_kpa;

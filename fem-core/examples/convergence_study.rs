@@ -8,8 +8,7 @@
 //! largest difference of a from the finest refinement; then the observed order of
 //! convergence `p = log2(d_k / d_2k)` from the RMS differences `d_k = rms(a_k - a_2k)`.
 
-use fem_core::problem::{MeshSpec, SolverSettings};
-use fem_core::{Curve, CurveParams};
+use fem_core::{Curve, CurveParams, Simulation};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -35,14 +34,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("E2 = {modulus} kPa, p_air = {pressure} kPa, level {level}, 34 steps to 1.7 mm");
     let mut curves: Vec<(usize, Curve)> = Vec::new();
     for &k in &refinements {
-        let mut settings = SolverSettings::for_level(level);
-        settings.mesh = MeshSpec::with_edge_refinement(level, k);
-        settings.penetration_tolerance_mm = 5e-4 * settings.mesh.sample_fine_size_mm;
+        let mut sim = Simulation::new(&params).with_edge_refinement(k);
         if points_per_edge > 0 {
-            settings.contact_passes =
+            sim.discretisation.contact =
                 fem_core::problem::ContactPasses::SampleEdgeQuadrature { points_per_edge };
         }
-        let curve = fem_core::solve_curve_with(&params, &settings)?;
+        let curve = sim.solve()?.complete()?;
         let at = |h: f64| {
             curve
                 .points

@@ -17,10 +17,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         sample_stiffening: get(6, 0.0),
         ..Default::default()
     };
-    let (curve, stop) = fem_core::solve_curve_partial(&params)?;
-    if let Some(e) = stop {
-        println!("stopped early: {e}");
+    let solution = fem_core::Simulation::new(&params).solve()?;
+    if let fem_core::StopReason::Stopped { at_h_mm, error } = &solution.stop {
+        println!("stopped early after h = {at_h_mm} mm: {error}");
     }
+    let curve = &solution.curve;
     println!(
         "rest volume {:.3} mm3, inflated {:.3} mm3, inflation apex {:.4} mm",
         curve.rest_volume_mm3, curve.inflated_volume_mm3, curve.inflation_apex_mm
@@ -48,8 +49,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("solve time {:.3} s", curve.solve_seconds);
     if std::env::var_os("FEM_STATS").is_some() {
         // stage-2 model diagnostics (one more solve of the same curve)
-        let settings = fem_core::SolverSettings::for_level(params.mesh_level);
-        let (_, ind, _) = fem_core::problem::solve_curve_state(&params, &settings)?;
+        let ind = &solution.indentation;
         let m = &ind.model;
         println!(
             "stage 2: {} equations, {} Newton iterations, assembly {:.3} s, linear solves \

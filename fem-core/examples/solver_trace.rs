@@ -17,21 +17,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         friction: get(3, 0.0),
         ..Default::default()
     };
-    let settings = fem_core::SolverSettings::for_level(params.mesh_level);
-    let started = std::time::Instant::now();
-    let chord = std::env::var("FEM_CHORD").ok();
-    let tune = |n: &mut fem_core::model::NewtonSettings| {
-        if let Some(c) = &chord {
-            let mut parts = c.split(',');
-            if let Some(k) = parts.next().and_then(|v| v.parse().ok()) {
-                n.max_chord_iterations = k;
-            }
-            if let Some(q) = parts.next().and_then(|v| v.parse().ok()) {
-                n.chord_contraction = q;
-            }
+    let mut sim = fem_core::Simulation::new(&params);
+    if let Ok(c) = std::env::var("FEM_CHORD") {
+        let mut parts = c.split(',');
+        if let Some(k) = parts.next().and_then(|v| v.parse().ok()) {
+            sim.linear_solver.chord_iterations = k;
         }
-    };
-    let (curve, ind, _) = fem_core::problem::solve_curve_state_tuned(&params, &settings, &tune)?;
+        if let Some(q) = parts.next().and_then(|v| v.parse().ok()) {
+            sim.linear_solver.chord_contraction = q;
+        }
+    }
+    let started = std::time::Instant::now();
+    let solution = sim.solve()?;
+    let (curve, ind) = (solution.curve, solution.indentation);
     let seconds = started.elapsed().as_secs_f64();
     let verbose = std::env::var_os("FEM_TRACE_QUIET").is_none();
     let mut per_step = std::collections::BTreeMap::<String, usize>::new();

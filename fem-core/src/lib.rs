@@ -5,11 +5,13 @@
 //! structured meshes), [`material`] (neo-Hookean / linear in mixed u–p form), [`element`]
 //! (Q9/P1 condensed mixed element), [`pressure_load`] (follower pressure), [`contact`]
 //! (node-to-segment augmented-Lagrangian contact), [`contact_edge`] (the contact radius), [`linear_solver`] (faer sparse Cholesky),
-//! [`model`] (assembly and Newton–Raphson), [`problem`] (the paper's two-stage indentation).
+//! [`model`] (assembly and Newton–Raphson), [`problem`] (the paper's two-stage indentation),
+//! [`simulation`] (the grouped parameters and the one entry point, [`Simulation::solve`]).
 
 pub mod contact;
 pub mod contact_edge;
 pub mod curve;
+pub mod discretisation;
 pub mod element;
 pub mod error;
 pub mod input_file;
@@ -22,7 +24,9 @@ pub mod pressure_load;
 pub mod problem;
 pub mod shape;
 pub mod shipped;
+pub mod simulation;
 
 pub use curve::{ContactPressureSample, Curve, CurveParams, CurvePoint, MaterialLaw};
 pub use error::FemError;
-pub use problem::{SolverSettings, solve_curve, solve_curve_partial, solve_curve_with};
+pub use problem::{SolverSettings, solve_curve};
+pub use simulation::{Simulation, Solution, StopReason};

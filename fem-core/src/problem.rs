@@ -733,63 +733,25 @@ fn continuation(
     Ok(())
 }
 
-/// Solve one a–u_s curve with the default solver settings for `params.mesh_level`.
+/// Solve one a–u_s curve with the default solver controls of `params.mesh_level`; an
+/// error if any load step fails. Shorthand for
+/// `Simulation::new(params).solve()?.complete()` (see [`crate::Simulation`] for every
+/// other control, the stop reason of a curve that ends early and the final state).
 pub fn solve_curve(params: &CurveParams) -> Result<Curve, FemError> {
-    solve_curve_with(params, &SolverSettings::for_level(params.mesh_level))
+    crate::Simulation::new(params).solve()?.complete()
 }
 
-/// Solve one a–u_s curve with explicit solver settings.
-///
-/// faer's global parallelism is set to sequential: curves are parallelised by the caller.
-pub fn solve_curve_with(
-    params: &CurveParams,
-    settings: &SolverSettings,
-) -> Result<Curve, FemError> {
-    solve_curve_state(params, settings).map(|(curve, _, _)| curve)
-}
+pub(crate) type Stages = (Curve, Indentation, Vec<f64>, Option<FemError>);
 
-/// Like [`solve_curve_with`], also returning the stage-2 model and its final displacement
-/// state (for benchmarks and diagnostics).
-pub fn solve_curve_state(
-    params: &CurveParams,
-    settings: &SolverSettings,
-) -> Result<(Curve, Indentation, Vec<f64>), FemError> {
-    solve_curve_state_tuned(params, settings, &|_| {})
-}
-
-/// Like [`solve_curve_state`], with the Newton controls of both stages' models adjusted by
-/// `tune` after they are built (e.g. to compare solver strategies in diagnostics).
-pub fn solve_curve_state_tuned(
-    params: &CurveParams,
-    settings: &SolverSettings,
-    tune: &dyn Fn(&mut NewtonSettings),
-) -> Result<(Curve, Indentation, Vec<f64>), FemError> {
-    solve_stages(params, settings, false, tune).map(|(curve, ind, state, _)| (curve, ind, state))
-}
-
-/// Like [`solve_curve`], but when stage 2 stops converging after at least one load step
-/// (e.g. the unpressurised shell snapping through against a stiff sample: a limit point that
-/// displacement control cannot pass), the curve up to the last converged step is returned
-/// together with the reason it stops. Callers must treat such a curve as covering only
-/// `h <= points.last().h_mm`. Stage-1 failures and failures before the first load step are
-/// still errors.
-pub fn solve_curve_partial(params: &CurveParams) -> Result<(Curve, Option<FemError>), FemError> {
-    solve_stages(
-        params,
-        &SolverSettings::for_level(params.mesh_level),
-        true,
-        &|_| {},
-    )
-    .map(|(curve, _, _, stop)| (curve, stop))
-}
-
-type Stages = (Curve, Indentation, Vec<f64>, Option<FemError>);
-
-fn solve_stages(
+/// Both stages with `settings`; `tune` adjusts the Newton controls of each stage's model
+/// after it is built. With `allow_truncation`, a stage-2 failure after the first converged
+/// step ends the curve (returned with the error) instead of failing the solve.
+pub(crate) fn solve_stages(
     params: &CurveParams,
     settings: &SolverSettings,
     allow_truncation: bool,
     tune: &dyn Fn(&mut NewtonSettings),
+    unsymmetric_friction: bool,
 ) -> Result<Stages, FemError> {
     validate(params)?;
     let started = Instant::now();
@@ -825,6 +787,9 @@ fn solve_stages(
     let mut ind = Indentation::build(params, settings, Some(top_z_mm));
     ind.stage1_stats = stage1.model.stats.clone();
     tune(&mut ind.model.newton);
+    for c in &mut ind.model.contacts {
+        c.unsymmetric_friction = unsymmetric_friction;
+    }
     let mut state = vec![0.0; ind.model.n_dofs()];
     state[..u.len()].copy_from_slice(&u);
     let apex_z0_mm = state[2 * ind.shell.inner_apex + 1];

@@ -4,8 +4,7 @@
 
 #![allow(clippy::unwrap_used)]
 
-use fem_core::problem::solve_curve_state;
-use fem_core::{CurveParams, SolverSettings};
+use fem_core::{CurveParams, Simulation, StopReason};
 
 fn state(
     depth_mm: f64,
@@ -17,7 +16,9 @@ fn state(
         mesh_level: -1,
         ..Default::default()
     };
-    solve_curve_state(&params, &SolverSettings::for_level(-1)).unwrap()
+    let solution = Simulation::new(&params).solve().unwrap();
+    assert_eq!(solution.stop, StopReason::Completed);
+    (solution.curve, solution.indentation, solution.displacement)
 }
 
 #[test]

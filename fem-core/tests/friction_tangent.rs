@@ -7,9 +7,7 @@
 // Test helpers may unwrap too (clippy.toml allows it only inside #[test] functions).
 #![allow(clippy::unwrap_used)]
 
-use fem_core::CurveParams;
-use fem_core::SolverSettings;
-use fem_core::problem::solve_curve_state;
+use fem_core::{CurveParams, Simulation};
 
 #[test]
 fn frictional_tangent_matches_finite_differences_of_the_residual() {
@@ -20,8 +18,8 @@ fn frictional_tangent_matches_finite_differences_of_the_residual() {
         mesh_level: -2,
         ..Default::default()
     };
-    let settings = SolverSettings::for_level(-2);
-    let (_, ind, state) = solve_curve_state(&params, &settings).unwrap();
+    let solution = Simulation::new(&params).solve().unwrap();
+    let (ind, state) = (solution.indentation, solution.displacement);
     let model = &ind.model;
     let contact = model.contacts.first().unwrap();
     // slide the sample's top outwards by a few slip-regularisation widths relative to the

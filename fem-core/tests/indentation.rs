@@ -5,8 +5,7 @@
 // Test helpers outside #[test] functions unwrap solver results too.
 #![allow(clippy::unwrap_used)]
 
-use fem_core::problem::solve_curve_state;
-use fem_core::{CurveParams, MaterialLaw, SolverSettings};
+use fem_core::{CurveParams, MaterialLaw, Simulation, StopReason};
 
 /// One indentation step: travel delta, contact radius a in the deformed configuration,
 /// load F (mN).
@@ -41,11 +40,13 @@ fn rigid_sphere(
         mesh_level: level,
         ..Default::default()
     };
-    let mut settings = SolverSettings::for_level(level);
+    let mut sim = Simulation::new(&params);
     // the contact zone is small: refine the sample's uniform zone around it
-    settings.mesh.sample_fine_radius_mm = 2.5;
-    settings.mesh.sample_fine_depth_mm = 2.0;
-    let (curve, ind, u) = solve_curve_state(&params, &settings).unwrap();
+    sim.discretisation.mesh.sample_fine_radius_mm = 2.5;
+    sim.discretisation.mesh.sample_fine_depth_mm = 2.0;
+    let solution = sim.solve().unwrap();
+    assert_eq!(solution.stop, StopReason::Completed);
+    let (curve, ind, u) = (solution.curve, solution.indentation, solution.displacement);
     let steps: Vec<Step> = curve
         .points
         .iter()

@@ -234,3 +234,25 @@ fn solver_answering_other_parameters_is_a_failure() {
     let lut = build_lut(&grid(), None, &wrong, STANDIN, &quiet).unwrap();
     assert_eq!(lut.failures().count(), grid().curve_count());
 }
+
+#[test]
+fn tables_of_fem_cores_solver_record_the_estimated_error_of_a() {
+    // the stand-in solver is not fem-core's: no estimate
+    let standin = full_build();
+    assert_eq!(standin.contact_radius_error, None);
+    // fem-core's own solver description at a studied level: recorded, and it survives the
+    // file round trip (the stand-in computes the curves; only the description matters)
+    let description = fem_core::lut::fem_solver_description(0);
+    let lut = build_lut(&grid(), None, &standin_solver, &description, &quiet).unwrap();
+    let expected = fem_core::discretisation::contact_radius_error(0);
+    assert!(expected.is_some());
+    assert_eq!(lut.contact_radius_error, expected);
+    let (bytes, _) = write_lut_bytes(&lut).unwrap();
+    let back = read_lut_bytes(&bytes, "t.lut").unwrap();
+    assert_eq!(back.header.mesh.contact_radius_error, expected);
+    assert_eq!(back.lut, lut);
+    // the estimate shrinks with refinement
+    let e = |level| fem_core::discretisation::contact_radius_error(level).unwrap();
+    assert!(e(-2).rms_um > e(-1).rms_um && e(-1).rms_um > e(0).rms_um && e(0).rms_um > e(1).rms_um);
+    assert_eq!(fem_core::discretisation::contact_radius_error(3), None);
+}

@@ -47,7 +47,6 @@ fn contact_radius_and_load_converge_at_the_production_mesh() {
 #[test]
 #[ignore = "a 4x edge-refined solve; run in release with --ignored"]
 fn contact_radius_at_the_production_mesh_is_within_its_documented_error() {
-    use fem_core::problem::{MeshSpec, SolverSettings};
     let params = CurveParams {
         sample_modulus_kpa: 1e7,
         max_depth_mm: 1.7,
@@ -55,10 +54,12 @@ fn contact_radius_at_the_production_mesh_is_within_its_documented_error() {
         ..Default::default()
     };
     let production = solve_curve(&params).unwrap();
-    let mut settings = SolverSettings::for_level(0);
-    settings.mesh = MeshSpec::with_edge_refinement(0, 4);
-    settings.penetration_tolerance_mm = 5e-4 * settings.mesh.sample_fine_size_mm;
-    let fine = fem_core::solve_curve_with(&params, &settings).unwrap();
+    let fine = fem_core::Simulation::new(&params)
+        .with_edge_refinement(4)
+        .solve()
+        .unwrap()
+        .complete()
+        .unwrap();
     let (mut da, mut dp, mut dus) = (0.0f64, 0.0f64, 0.0f64);
     for (p, q) in production.points.iter().zip(&fine.points) {
         if p.h_mm < 0.2 - 1e-9 {

@@ -11,17 +11,21 @@ use super::grid::{LutGrid, Shard};
 use super::table::{Lut, LutCurve};
 use crate::curve::{Curve, CurveParams};
 
+/// How [`fem_solver_description`] starts: tables of fem-core's own solver record the
+/// estimated discretisation error of a ([`crate::discretisation`]).
+const FEM_CORE_SOLVER: &str = "fem_core::solve_curve";
+
 /// Description of fem-core's own solver ([`crate::solve_curve`]) at a mesh level: its
 /// settings, including the mesh divisions, as recorded in tables it builds.
 pub fn fem_solver_description(mesh_level: i32) -> String {
     format!(
-        "fem_core::solve_curve with {:?}; {}",
+        "{FEM_CORE_SOLVER} with {:?}; {}",
         crate::problem::SolverSettings::for_level(mesh_level),
         crate::problem::OUTPUT_DEFINITIONS
     )
 }
 
-/// The curve solver used for tables: [`crate::solve_curve_partial`], i.e. a curve whose
+/// The curve solver used for tables: [`crate::Simulation::solve`], i.e. a curve whose
 /// stage 2 stops converging (snap-through of the unpressurised shell on a stiff sample) is
 /// kept up to its last converged step; the table records it as truncated
 /// (`CurveEntry::truncated_at_h_mm`) and interpolation covers only its u_s range. The
@@ -30,11 +34,11 @@ pub fn solve_curve_for_table(
     params: &CurveParams,
     on_stop: &(dyn Fn(&CurveParams, &crate::FemError) + Sync),
 ) -> Result<Curve, crate::FemError> {
-    let (curve, stop) = crate::solve_curve_partial(params)?;
-    if let Some(e) = &stop {
-        on_stop(params, e);
+    let solution = crate::Simulation::new(params).solve()?;
+    if let crate::StopReason::Stopped { error, .. } = &solution.stop {
+        on_stop(params, error);
     }
-    Ok(curve)
+    Ok(solution.curve)
 }
 
 /// Progress report for one finished curve (for printing; never stored in the table).
@@ -132,6 +136,10 @@ where
         fem_core_version: Lut::this_fem_core_version(),
         solver: solver_description.to_string(),
         shard,
+        contact_radius_error: solver_description
+            .starts_with(FEM_CORE_SOLVER)
+            .then(|| crate::discretisation::contact_radius_error(grid.base.mesh_level))
+            .flatten(),
         curves,
     })
 }

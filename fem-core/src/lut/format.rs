@@ -44,6 +44,10 @@ pub struct MeshDescription {
     pub description: String,
     /// The solver and its settings (mesh divisions, contact penalty, ...).
     pub solver: String,
+    /// The estimated discretisation error of the contact radius at this mesh level
+    /// (`fem_core::discretisation`); absent in tables of other solvers or levels.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub contact_radius_error: Option<crate::discretisation::ContactRadiusError>,
 }
 
 /// One curve's entry in the header.
@@ -54,7 +58,7 @@ pub struct CurveEntry {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub failure: Option<String>,
     /// Set when the curve stops before the grid's `max_depth_mm` (the solver stopped
-    /// converging there, e.g. a snap-through; see `fem_core::solve_curve_partial`): the last
+    /// converging there, e.g. a snap-through; see `fem_core::StopReason::Stopped`): the last
     /// stored tube travel. Queries beyond the curve's last u_s are out of range.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub truncated_at_h_mm: Option<f64>,
@@ -102,6 +106,7 @@ impl LutHeader {
                               mesh, +1 halves the element size, -1 doubles it"
                         .to_string(),
                 solver: lut.solver.clone(),
+                contact_radius_error: lut.contact_radius_error,
             },
             shard: lut.shard,
             // the stiffening axis (outermost) is named only when it is varied, so tables
@@ -349,6 +354,7 @@ pub fn read_lut_bytes(bytes: &[u8], source_name: &str) -> Result<LutFile, LutErr
         fem_core_version: header.fem_core_version.clone(),
         solver: header.mesh.solver.clone(),
         shard: header.shard,
+        contact_radius_error: header.mesh.contact_radius_error,
         curves,
     };
     lut.validate()

@@ -134,6 +134,9 @@ pub struct Lut {
     pub solver: String,
     /// `Some` for a shard file, `None` for a complete table.
     pub shard: Option<Shard>,
+    /// The estimated discretisation error of the curves' contact radius (fem-core's own
+    /// solver at a studied mesh level; `None` otherwise).
+    pub contact_radius_error: Option<crate::discretisation::ContactRadiusError>,
     /// Curves sorted by grid index: every index of the grid (or of the shard) exactly once.
     pub curves: Vec<LutCurve>,
 }
@@ -345,6 +348,7 @@ pub fn merge_shards(shards: &[(String, Lut)]) -> Result<Lut, LutError> {
         fem_core_version: first.fem_core_version.clone(),
         solver: first.solver.clone(),
         shard: None,
+        contact_radius_error: first.contact_radius_error,
         curves,
     };
     merged

@@ -184,7 +184,7 @@ pub enum TruthError {
 }
 
 /// The truth mechanics of a scenario (the expensive part: fem-core solves, each kept up to
-/// its last converged step, [`fem_core::solve_curve_partial`]).
+/// its last converged step, [`fem_core::StopReason`]).
 pub fn truth_mechanics(scenario: &Scenario) -> Result<Truth, TruthError> {
     if !matches!(scenario.mechanics, MechanicsSource::Solve { .. }) {
         let mechanics = hil_sim::mechanics_source::build_mechanics(scenario)?;
@@ -196,12 +196,14 @@ pub fn truth_mechanics(scenario: &Scenario) -> Result<Truth, TruthError> {
     let mut curves = Vec::new();
     let mut reached = f64::INFINITY;
     for params in hil_sim::mechanics_source::solve_params(scenario) {
-        let (curve, _stop) =
-            fem_core::solve_curve_partial(&params).map_err(|source| TruthError::Solve {
+        let curve = fem_core::Simulation::new(&params)
+            .solve()
+            .map_err(|source| TruthError::Solve {
                 modulus_kpa: params.sample_modulus_kpa,
                 pressure_kpa: params.pressure_kpa,
                 source,
-            })?;
+            })?
+            .curve;
         reached = reached.min(curve.points.last().map_or(0.0, |q| q.h_mm));
         curves.push(curve);
     }

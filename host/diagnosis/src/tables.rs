@@ -298,6 +298,7 @@ pub fn sub_table(lut: &Lut, sel: &EffectSelection) -> Result<Lut, TableError> {
         fem_core_version: lut.fem_core_version.clone(),
         solver: lut.solver.clone(),
         shard: None,
+        contact_radius_error: lut.contact_radius_error,
         curves,
     };
     out.validate().map_err(|defect| TableError::Invalid {

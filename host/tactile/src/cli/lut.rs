@@ -327,6 +327,13 @@ fn describe(path: &Path, file: &LutFile) -> String {
     ));
     line(format!("mesh level:    {}", h.mesh.mesh_level));
     line(format!("solver:        {}", h.mesh.solver));
+    line(match h.mesh.contact_radius_error {
+        Some(e) => format!(
+            "error of a:    ~{:.1} um RMS, up to {:.1} um (estimated for mesh level {})",
+            e.rms_um, e.max_um, h.mesh.mesh_level
+        ),
+        None => "error of a:    not estimated for this table".to_string(),
+    });
     let ok: Vec<_> = lut.curves.iter().filter(|c| c.failure.is_none()).collect();
     if let (Some(min), Some(max)) = (
         ok.iter().map(|c| c.len()).min(),

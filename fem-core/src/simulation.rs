@@ -1,0 +1,356 @@
+//! The solver's front door: one parameter structure, grouped as the physics reads
+//! (geometry, materials, loading, discretisation, nonlinear and linear solver, after
+//! deal.II's step-44), and one entry point, [`Simulation::solve`], that returns the curve
+//! with the reason it stopped.
+//!
+//! ```no_run
+//! use fem_core::{CurveParams, Simulation, StopReason};
+//!
+//! let mut sim = Simulation::new(&CurveParams::default());
+//! sim.materials.sample_modulus_kpa = 450.0;
+//! sim.loading.pressure_kpa = 15.0;
+//! sim.discretisation.mesh_level = 1;
+//! let solution = sim.solve()?;
+//! if let StopReason::Stopped { at_h_mm, .. } = &solution.stop {
+//!     println!("the curve ends at h = {at_h_mm} mm");
+//! }
+//! println!("{} points", solution.curve.points.len());
+//! # Ok::<(), fem_core::FemError>(())
+//! ```
+//!
+//! [`CurveParams`] stays the compact, serialised description of a curve (tables record it);
+//! [`Simulation::new`] expands it with the default solver controls of its mesh level, and
+//! [`Simulation::curve_params`] gives it back.
+
+use crate::FemError;
+use crate::curve::{Curve, CurveParams, MaterialLaw};
+use crate::element::Formulation;
+use crate::model::NewtonSettings;
+use crate::problem::{ContactPasses, Indentation, MeshSpec, SolverSettings, solve_stages};
+
+/// The bodies' dimensions. The shell's radius and wall are the sensor's
+/// ([`crate::problem::SHELL_OUTER_RADIUS_MM`], [`crate::problem::SHELL_WALL_MM`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Geometry {
+    /// Sample cylinder radius.
+    pub sample_radius_mm: f64,
+    /// Sample height, bonded to a rigid base.
+    pub sample_thickness_mm: f64,
+    /// Length of the shell's cylindrical skirt clamped in the tube.
+    pub shell_skirt_mm: f64,
+}
+
+/// Constitutive parameters of both bodies and of their interface.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Materials {
+    /// Shell Young's modulus E1 and Poisson ratio nu1.
+    pub shell_modulus_kpa: f64,
+    pub shell_poisson: f64,
+    /// Sample Young's modulus E2 and Poisson ratio nu2.
+    pub sample_modulus_kpa: f64,
+    pub sample_poisson: f64,
+    /// Law of both bodies.
+    pub law: MaterialLaw,
+    /// The sample's Yeoh ratio c2/c1 (0: neo-Hookean).
+    pub sample_stiffening: f64,
+    /// Coulomb friction coefficient of the shell–sample interface (0: frictionless).
+    pub friction: f64,
+}
+
+/// What is applied: the internal pressure (stage 1, then held), the tube travel (stage 2).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Loading {
+    pub pressure_kpa: f64,
+    /// Final tube travel h.
+    pub max_depth_mm: f64,
+    /// Equal load steps of stage 2, each reported (the solver cuts them internally).
+    pub steps: usize,
+}
+
+/// How space and contact are discretised.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Discretisation {
+    /// 0: the production mesh; +1 halves every element size; negative coarsens.
+    pub mesh_level: i32,
+    /// The meshes' divisions and gradings (derived from `mesh_level` by
+    /// [`Simulation::new`]; see [`MeshSpec::with_edge_refinement`] to refine along the
+    /// contact surfaces only).
+    pub mesh: MeshSpec,
+    /// Mixed (Q9/P1) or displacement-only elements.
+    pub formulation: Formulation,
+    /// Which surfaces carry the contact constraints.
+    pub contact: ContactPasses,
+    /// Contact penalty = factor * min(E1, E2) / (sample's fine element size).
+    pub penalty_factor: f64,
+    /// Width of the contact law's smoothing, as a fraction of the fine element size.
+    pub contact_smoothing: f64,
+}
+
+/// Newton–Raphson with load-step control and Uzawa augmentation of the contact.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NonlinearSolver {
+    /// Pressure increments of stage 1 before any cutting.
+    pub stage1_steps: usize,
+    /// Times a load step may be halved in a row.
+    pub max_cuts: u32,
+    /// Newton gives up early on a step still far from equilibrium after this many
+    /// iterations (the step is cut instead).
+    pub stall_iterations: usize,
+    /// Largest Newton correction, as a fraction of the sample's fine element size.
+    pub max_correction: f64,
+    /// Uzawa augmentations of the contact multipliers per load step.
+    pub augmentations: usize,
+    /// Augmentation stops once the largest penetration is below this.
+    pub penetration_tolerance_mm: f64,
+}
+
+/// The sparse linear solves inside Newton (faer sparse Cholesky with LDL^T / LU
+/// fallbacks on the same pattern).
+#[derive(Debug, Clone, PartialEq)]
+pub struct LinearSolver {
+    /// Chord iterations per Newton solve that reuse the last factorisation (0: always
+    /// refactorise), while each reduces the residual by `chord_contraction` and the
+    /// factorisation was taken below the relative residual `chord_below`.
+    pub chord_iterations: usize,
+    pub chord_contraction: f64,
+    pub chord_below: f64,
+    /// Solve sliding friction with its exact unsymmetric Jacobian (sparse LU) rather than
+    /// its symmetric part (Cholesky; Newton then converges linearly at best).
+    pub unsymmetric_friction: bool,
+}
+
+/// One indentation simulation: the paper's two-stage problem (inflation, then the tube
+/// pushed into the sample) with every parameter in one place.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Simulation {
+    pub geometry: Geometry,
+    pub materials: Materials,
+    pub loading: Loading,
+    pub discretisation: Discretisation,
+    pub nonlinear_solver: NonlinearSolver,
+    pub linear_solver: LinearSolver,
+}
+
+/// Why stage 2 ended.
+#[derive(Debug, Clone, PartialEq)]
+pub enum StopReason {
+    /// Every requested load step converged.
+    Completed,
+    /// A load step did not converge even after cutting (e.g. a limit point the tube's
+    /// displacement control cannot pass); the curve holds the converged steps up to
+    /// `at_h_mm`.
+    Stopped { at_h_mm: f64, error: FemError },
+}
+
+/// The solved curve, why it ended and the final state of the stage-2 model.
+#[derive(Debug)]
+pub struct Solution {
+    pub curve: Curve,
+    pub stop: StopReason,
+    /// The stage-2 model (mesh, contact state, Newton statistics and attempt log).
+    pub indentation: Indentation,
+    /// Displacements of the last converged step (2 per node).
+    pub displacement: Vec<f64>,
+}
+
+impl Solution {
+    /// The curve if every load step converged, the reason otherwise.
+    pub fn complete(self) -> Result<Curve, FemError> {
+        match self.stop {
+            StopReason::Completed => Ok(self.curve),
+            StopReason::Stopped { error, .. } => Err(error),
+        }
+    }
+}
+
+impl Simulation {
+    /// `params` with the default discretisation and solver controls of its mesh level.
+    pub fn new(params: &CurveParams) -> Self {
+        let s = SolverSettings::for_level(params.mesh_level);
+        let newton = NewtonSettings::default();
+        Self {
+            geometry: Geometry {
+                sample_radius_mm: params.sample_radius_mm,
+                sample_thickness_mm: params.sample_thickness_mm,
+                shell_skirt_mm: s.shell_skirt_mm,
+            },
+            materials: Materials {
+                shell_modulus_kpa: params.shell_modulus_kpa,
+                shell_poisson: params.shell_poisson,
+                sample_modulus_kpa: params.sample_modulus_kpa,
+                sample_poisson: params.sample_poisson,
+                law: params.material,
+                sample_stiffening: params.sample_stiffening,
+                friction: params.friction,
+            },
+            loading: Loading {
+                pressure_kpa: params.pressure_kpa,
+                max_depth_mm: params.max_depth_mm,
+                steps: params.steps,
+            },
+            discretisation: Discretisation {
+                mesh_level: params.mesh_level,
+                mesh: s.mesh,
+                formulation: s.formulation,
+                contact: s.contact_passes,
+                penalty_factor: s.penalty_factor,
+                contact_smoothing: s.contact_smoothing,
+            },
+            nonlinear_solver: NonlinearSolver {
+                stage1_steps: s.stage1_steps,
+                max_cuts: s.max_cuts,
+                stall_iterations: s.stall_iterations,
+                max_correction: s.max_correction,
+                augmentations: s.augmentations,
+                penetration_tolerance_mm: s.penetration_tolerance_mm,
+            },
+            linear_solver: LinearSolver {
+                chord_iterations: newton.max_chord_iterations,
+                chord_contraction: newton.chord_contraction,
+                chord_below: newton.chord_below,
+                unsymmetric_friction: true,
+            },
+        }
+    }
+
+    /// The production discretisation refined `refinement` times along both contact
+    /// surfaces (see [`MeshSpec::with_edge_refinement`]), the augmentation's penetration
+    /// tolerance scaled with the finer element size.
+    pub fn with_edge_refinement(mut self, refinement: usize) -> Self {
+        let level = self.discretisation.mesh_level;
+        self.discretisation.mesh = MeshSpec::with_edge_refinement(level, refinement);
+        self.nonlinear_solver.penetration_tolerance_mm =
+            5e-4 * self.discretisation.mesh.sample_fine_size_mm;
+        self
+    }
+
+    /// The compact curve description (what tables and curve files record).
+    pub fn curve_params(&self) -> CurveParams {
+        CurveParams {
+            sample_modulus_kpa: self.materials.sample_modulus_kpa,
+            sample_poisson: self.materials.sample_poisson,
+            sample_radius_mm: self.geometry.sample_radius_mm,
+            sample_thickness_mm: self.geometry.sample_thickness_mm,
+            shell_modulus_kpa: self.materials.shell_modulus_kpa,
+            shell_poisson: self.materials.shell_poisson,
+            pressure_kpa: self.loading.pressure_kpa,
+            friction: self.materials.friction,
+            material: self.materials.law,
+            sample_stiffening: self.materials.sample_stiffening,
+            max_depth_mm: self.loading.max_depth_mm,
+            steps: self.loading.steps,
+            mesh_level: self.discretisation.mesh_level,
+        }
+    }
+
+    /// The solver controls in the form the stage builder takes.
+    pub fn solver_settings(&self) -> SolverSettings {
+        let d = &self.discretisation;
+        let n = &self.nonlinear_solver;
+        SolverSettings {
+            mesh: d.mesh,
+            formulation: d.formulation,
+            penalty_factor: d.penalty_factor,
+            max_correction: n.max_correction,
+            contact_smoothing: d.contact_smoothing,
+            augmentations: n.augmentations,
+            penetration_tolerance_mm: n.penetration_tolerance_mm,
+            stage1_steps: n.stage1_steps,
+            max_cuts: n.max_cuts,
+            stall_iterations: n.stall_iterations,
+            shell_skirt_mm: self.geometry.shell_skirt_mm,
+            contact_passes: d.contact,
+        }
+    }
+
+    /// Solve both stages. Errors: invalid parameters, a failed inflation, or a failure
+    /// before the first load step of stage 2 converged; a later failure ends the curve
+    /// with [`StopReason::Stopped`].
+    pub fn solve(&self) -> Result<Solution, FemError> {
+        let params = self.curve_params();
+        let settings = self.solver_settings();
+        let linear = self.linear_solver.clone();
+        let tune = move |newton: &mut NewtonSettings| {
+            newton.max_chord_iterations = linear.chord_iterations;
+            newton.chord_contraction = linear.chord_contraction;
+            newton.chord_below = linear.chord_below;
+        };
+        let (curve, indentation, displacement, stop) = solve_stages(
+            &params,
+            &settings,
+            true,
+            &tune,
+            self.linear_solver.unsymmetric_friction,
+        )?;
+        let stop = match stop {
+            None => StopReason::Completed,
+            Some(error) => StopReason::Stopped {
+                at_h_mm: curve.points.last().map_or(0.0, |p| p.h_mm),
+                error,
+            },
+        };
+        Ok(Solution {
+            curve,
+            stop,
+            indentation,
+            displacement,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn curve_params_round_trip_through_the_grouped_parameters() {
+        let params = CurveParams {
+            sample_modulus_kpa: 321.0,
+            sample_poisson: 0.45,
+            sample_radius_mm: 30.0,
+            sample_thickness_mm: 5.0,
+            shell_modulus_kpa: 2000.0,
+            shell_poisson: 0.48,
+            pressure_kpa: 12.0,
+            friction: 0.3,
+            material: MaterialLaw::Linear,
+            sample_stiffening: 0.0,
+            max_depth_mm: 1.5,
+            steps: 7,
+            mesh_level: -1,
+        };
+        let sim = Simulation::new(&params);
+        assert_eq!(sim.curve_params(), params);
+        assert_eq!(sim.solver_settings(), SolverSettings::for_level(-1));
+    }
+
+    #[test]
+    fn a_short_coarse_curve_completes() {
+        let params = CurveParams {
+            max_depth_mm: 0.3,
+            steps: 3,
+            mesh_level: -2,
+            ..Default::default()
+        };
+        let solution = Simulation::new(&params).solve().unwrap();
+        assert_eq!(solution.stop, StopReason::Completed);
+        assert_eq!(solution.curve.points.len(), 4);
+        assert_eq!(
+            solution.displacement.len(),
+            solution.indentation.model.n_dofs()
+        );
+        assert!(solution.curve.points[3].a_mm > 0.0);
+    }
+
+    #[test]
+    fn invalid_parameters_are_errors_naming_the_field() {
+        let mut sim = Simulation::new(&CurveParams::default());
+        sim.materials.sample_modulus_kpa = -1.0;
+        match sim.solve() {
+            Err(FemError::InvalidParameter { field, .. }) => {
+                assert_eq!(field, "sample_modulus_kpa")
+            }
+            other => panic!("expected an invalid parameter, got {other:?}"),
+        }
+    }
+}
