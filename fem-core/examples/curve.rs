@@ -22,6 +22,22 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         println!("stopped early after h = {at_h_mm} mm: {error}");
     }
     let curve = &solution.curve;
+    if let Some(j) = solution.snap_through_jump() {
+        println!(
+            "snap-through at h = {:.4} mm: u_s {:.4} -> {:.4} mm, a {:.4} -> {:.4} mm, P {:.4} -> {:.4} N",
+            j.h_mm, j.u_s_mm[0], j.u_s_mm[1], j.a_mm[0], j.a_mm[1], j.load_n[0], j.load_n[1]
+        );
+    }
+    if !solution.snap_through.is_empty() && std::env::var_os("FEM_SNAP_PATH").is_some() {
+        println!("snap-through path (apex-controlled; h turns back):");
+        println!("h_mm u_s_mm a_mm load_n");
+        for p in &solution.snap_through {
+            println!(
+                "{:.5} {:.5} {:.5} {:.6}",
+                p.h_mm, p.u_s_mm, p.a_mm, p.load_n
+            );
+        }
+    }
     println!(
         "rest volume {:.3} mm3, inflated {:.3} mm3, inflation apex {:.4} mm",
         curve.rest_volume_mm3, curve.inflated_volume_mm3, curve.inflation_apex_mm

@@ -442,6 +442,145 @@ impl Model {
         self.solve_logged(u, p_kpa, true)
     }
 
+    /// Newton–Raphson for the equilibrium with one more unknown, a load parameter lambda
+    /// that moves prescribed dofs (`prescribed[d] = coef * lambda` for `(d, coef)` in
+    /// `load_dofs`), and one more equation, the linear constraint
+    /// `sum_j w_j u_j + w_lambda lambda = target` (`constraint` holds the `(dof, w_j)`).
+    /// Displacement control of a quantity other than the loaded dofs: past a limit point
+    /// of lambda (a snap-through) the constrained quantity keeps increasing while lambda
+    /// turns back.
+    ///
+    /// Bordering algorithm (Crisfield, "Non-linear Finite Element Analysis of Solids and
+    /// Structures", vol. 1, sec. 9.3): with the tangent K and `r_lambda = dR/d lambda`
+    /// (forward difference), `K du_r = -R`, `K du_l = -r_lambda` with one factorisation;
+    /// `d lambda = (-c - w . du_r) / (w . du_l + w_lambda)`, `du = du_r + d lambda du_l`.
+    /// Frictionless (symmetric) tangents only. Returns the iterations used.
+    #[allow(clippy::too_many_arguments)] // the bordered system's parts, each named
+    pub fn solve_equilibrium_bordered(
+        &mut self,
+        u: &mut [f64],
+        p_kpa: f64,
+        lambda: &mut f64,
+        load_dofs: &[(usize, f64)],
+        constraint: &[(usize, f64)],
+        constraint_lambda: f64,
+        target: f64,
+    ) -> Result<usize, NewtonFailure> {
+        self.stats.newton_solves += 1;
+        self.stats.last_history.clear();
+        let set_lambda = |model: &mut Self, lambda: f64| {
+            for &(d, coef) in load_dofs {
+                model.prescribed[d] = coef * lambda;
+            }
+        };
+        let mut last = (f64::NAN, f64::NAN);
+        let mut last_du = f64::INFINITY;
+        for it in 0..self.newton.max_iterations {
+            set_lambda(self, *lambda);
+            self.apply_prescribed(u);
+            let t0 = std::time::Instant::now();
+            let assembled = self.assemble(u, p_kpa, true);
+            self.assembly_seconds += t0.elapsed().as_secs_f64();
+            self.stats.assemblies += 1;
+            let asm = match assembled {
+                Some(a) if a.min_jacobian > 0.0 && a.min_jacobian.is_finite() => a,
+                _ => return Err(NewtonFailure::InvertedElement),
+            };
+            if !asm.skew.is_empty() {
+                return Err(NewtonFailure::Linear(FemError::Unsupported(
+                    "the bordered (load-parameter) Newton solve needs a symmetric tangent \
+                     (frictionless contact)",
+                )));
+            }
+            let r = self.restrict(&asm.residual);
+            let norm = r.iter().map(|x| x * x).sum::<f64>().sqrt();
+            let reference = asm.force_scale;
+            last = (norm, reference);
+            self.stats.last_history.push(norm / reference);
+            let c = constraint.iter().map(|&(d, w)| w * u[d]).sum::<f64>()
+                + constraint_lambda * *lambda
+                - target;
+            if !norm.is_finite() {
+                break;
+            }
+            // as in the plain solve: a round-off-level correction with a small residual is
+            // converged too (the penalty stiffness limits the attainable residual)
+            if (norm <= self.newton.relative_tolerance * reference + self.newton.absolute_tolerance
+                || (last_du <= 1e-11 && norm <= 1e-6 * reference))
+                && c.abs() <= 1e-12
+            {
+                self.newton_iterations += it;
+                return Ok(it);
+            }
+            // dR/d lambda by a forward difference of the residual
+            let delta = 1e-7;
+            let mut shifted = u.to_vec();
+            set_lambda(self, *lambda + delta);
+            self.apply_prescribed(&mut shifted);
+            let r_shift = self
+                .assemble(&shifted, p_kpa, false)
+                .map(|a| self.restrict(&a.residual))
+                .ok_or(NewtonFailure::InvertedElement)?;
+            self.stats.residual_assemblies += 1;
+            set_lambda(self, *lambda);
+            let rhs_r: Vec<f64> = r.iter().map(|x| -x).collect();
+            let rhs_l: Vec<f64> = r_shift
+                .iter()
+                .zip(&r)
+                .map(|(a, b)| -(a - b) / delta)
+                .collect();
+            let t0 = std::time::Instant::now();
+            self.stats.factorizations += 1;
+            let du_r = self
+                .solver
+                .solve(self.n_equations, &asm.tangent, &rhs_r)
+                .map_err(NewtonFailure::Linear)?;
+            self.stats.resolves += 1;
+            let du_l = self.solver.resolve(&rhs_l).ok_or(NewtonFailure::Linear(
+                FemError::LinearSolver("no factorisation to reuse".into()),
+            ))?;
+            self.solve_seconds += t0.elapsed().as_secs_f64();
+            let free_dot = |du: &[f64]| -> f64 {
+                constraint
+                    .iter()
+                    .filter_map(|&(d, w)| self.equation[d].map(|e| w * du[e]))
+                    .sum()
+            };
+            let denominator = free_dot(&du_l) + constraint_lambda;
+            if denominator.abs() < 1e-300 || !denominator.is_finite() {
+                return Err(NewtonFailure::NotConverged {
+                    residual: norm,
+                    reference,
+                });
+            }
+            let mut d_lambda = (-c - free_dot(&du_r)) / denominator;
+            let mut du: Vec<f64> = du_r
+                .iter()
+                .zip(&du_l)
+                .map(|(a, b)| a + d_lambda * b)
+                .collect();
+            let longest = du.iter().fold(d_lambda.abs(), |m: f64, x| m.max(x.abs()));
+            if longest > self.newton.max_correction_mm {
+                let scale = self.newton.max_correction_mm / longest;
+                du.iter_mut().for_each(|x| *x *= scale);
+                d_lambda *= scale;
+            }
+            for (d, e) in self.equation.iter().enumerate() {
+                if let Some(e) = e {
+                    u[d] += du[*e];
+                }
+            }
+            *lambda += d_lambda;
+            last_du = longest.min(self.newton.max_correction_mm);
+        }
+        self.newton_iterations += self.newton.max_iterations;
+        set_lambda(self, *lambda);
+        Err(NewtonFailure::NotConverged {
+            residual: last.0,
+            reference: last.1,
+        })
+    }
+
     fn solve_logged(
         &mut self,
         u: &mut [f64],

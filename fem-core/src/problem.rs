@@ -47,7 +47,8 @@ pub const SHELL_SKIRT_MM: f64 = 4.0;
 /// How the per-step outputs are post-processed from the converged state; recorded in the
 /// tables' solver description so a table built with another definition is detected.
 pub const OUTPUT_DEFINITIONS: &str = "contact radius: weighted quadratic g^(2/3) edge extrapolation over open node triples, merged contact passes (v3); tables: \
-     a curve whose stage 2 stops converging keeps its converged steps (truncated)";
+     a curve whose stage 2 stops converging keeps its converged steps (truncated); limit points \
+     of the travel: the path followed under apex-displacement control to the step's end (v4)";
 
 /// Mesh description derived from `mesh_level`.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -287,6 +288,12 @@ pub struct Indentation {
     pub attempts: Vec<StepAttempt>,
     /// Newton counters of stage 1 (the inflation, solved on a separate shell-only model).
     pub stage1_stats: crate::model::SolverStats,
+    /// Equilibria traced past limit points of the tube travel (snap-throughs), in path
+    /// order; see [`Indentation::trace_snap_through`].
+    pub snap_through_path: Vec<CurvePoint>,
+    /// Set when the last committed step landed on a new branch: the secant predictor must
+    /// not extrapolate the jump.
+    new_branch: bool,
 }
 
 /// Diagnostic record of one attempted stage-2 step: the target travel, whether it
@@ -447,6 +454,8 @@ impl Indentation {
             edge_gap_floor_mm: settings.penetration_tolerance_mm.max(1e-9),
             attempts: Vec::new(),
             stage1_stats: Default::default(),
+            snap_through_path: Vec::new(),
+            new_branch: false,
         }
     }
 
@@ -545,6 +554,124 @@ impl Indentation {
             }
             // same state and load, updated multipliers: the last tangent still fits
             self.newton_logged(u, p_kpa, true)?;
+        }
+        Ok(())
+    }
+
+    /// Follow the equilibrium path past a limit point of the tube travel. From the
+    /// converged state `u` at travel `h_from`, the load step to `h_to` found no equilibrium
+    /// by small steps: the tube's force-travel path turns back (a snap-through of the
+    /// shell). Here the apex displacement u_s is the controlled quantity instead and the
+    /// travel h is an unknown ([`Model::solve_equilibrium_bordered`]): u_s increases in
+    /// steps of `SNAP_US_STEP_MM` (halved on failure) until the path's h reaches `h_to`
+    /// again; then the equilibrium at `h_to` on that branch is solved under the usual
+    /// travel control. The path's points are appended to `snap_through_path`; returns the
+    /// state at `h_to`.
+    fn trace_snap_through(
+        &mut self,
+        u: &[f64],
+        h_from: f64,
+        h_to: f64,
+        p_kpa: f64,
+        settings: &SolverSettings,
+        apex_z0_mm: f64,
+    ) -> Result<Vec<f64>, NewtonFailure> {
+        let apex_dof = 2 * self.shell.inner_apex + 1;
+        let load_dofs: Vec<(usize, f64)> = self.clamp_z_dofs.iter().map(|&d| (d, -1.0)).collect();
+        let constraint = [(apex_dof, 1.0)];
+        let mut state = u.to_vec();
+        let mut h = h_from;
+        let mut u_s = h + state[apex_dof] - apex_z0_mm;
+        let u_s_start = u_s;
+        let mut step = SNAP_US_STEP_MM;
+        let mut path = Vec::new();
+        while h < h_to {
+            if u_s - u_s_start > SNAP_US_MAX_MM {
+                return Err(NewtonFailure::NotConverged {
+                    residual: f64::NAN,
+                    reference: f64::NAN,
+                });
+            }
+            let saved: Vec<Vec<f64>> = self
+                .model
+                .contacts
+                .iter()
+                .map(|c| c.multipliers.clone())
+                .collect();
+            let mut trial = state.clone();
+            let mut h_trial = h;
+            let target = u_s + step;
+            let solved = self.solve_bordered_step(
+                &mut trial,
+                &mut h_trial,
+                p_kpa,
+                settings,
+                &load_dofs,
+                &constraint,
+                target + apex_z0_mm,
+            );
+            match solved {
+                Ok(()) => {
+                    state = trial;
+                    h = h_trial;
+                    u_s = target;
+                    path.push(self.curve_point(&state, h, apex_z0_mm));
+                    step = (step * 2.0).min(SNAP_US_STEP_MM);
+                }
+                Err(e) => {
+                    for (c, m) in self.model.contacts.iter_mut().zip(saved) {
+                        c.multipliers = m;
+                    }
+                    step *= 0.5;
+                    if step < SNAP_US_STEP_MM / 64.0 {
+                        return Err(e);
+                    }
+                }
+            }
+        }
+        // back under travel control, on the branch the path reached
+        self.previous = None;
+        let mut landing = state;
+        self.solve_step(&mut landing, h_to, p_kpa, settings)?;
+        self.snap_through_path.extend(path);
+        self.new_branch = true;
+        Ok(landing)
+    }
+
+    /// One step of the apex-controlled path: the bordered Newton solve, then Uzawa
+    /// augmentations as in [`Self::solve_step`].
+    #[allow(clippy::too_many_arguments)] // the bordered system's parts, each named
+    fn solve_bordered_step(
+        &mut self,
+        u: &mut [f64],
+        h: &mut f64,
+        p_kpa: f64,
+        settings: &SolverSettings,
+        load_dofs: &[(usize, f64)],
+        constraint: &[(usize, f64)],
+        target: f64,
+    ) -> Result<(), NewtonFailure> {
+        self.model
+            .solve_equilibrium_bordered(u, p_kpa, h, load_dofs, constraint, 1.0, target)?;
+        for _ in 0..settings.augmentations {
+            let model = &self.model;
+            let pos = |n: usize| model.position(u, n);
+            let penetration = model
+                .contacts
+                .iter()
+                .map(|c| c.max_penetration(&pos))
+                .fold(0.0, f64::max);
+            if penetration <= settings.penetration_tolerance_mm {
+                break;
+            }
+            let pos_nodes: Vec<[f64; 2]> = (0..model.mesh.nodes.len())
+                .map(|n| model.position(u, n))
+                .collect();
+            for contact in &mut self.model.contacts {
+                contact.augment(&|n: usize| pos_nodes[n]);
+            }
+            self.model
+                .solve_equilibrium_bordered(u, p_kpa, h, load_dofs, constraint, 1.0, target)?;
         }
         Ok(())
     }
@@ -667,6 +794,12 @@ fn consistent_pressure(current: &[[f64; 2]], forces: &[f64], end: usize) -> Vec<
     out
 }
 
+/// Apex-displacement increment of the snap-through path ([`Indentation::trace_snap_through`]).
+const SNAP_US_STEP_MM: f64 = 0.01;
+/// The snap-through path gives up if u_s grows by more than this without h reaching the
+/// step's end (the shell's apex cannot move further than its own height).
+const SNAP_US_MAX_MM: f64 = 3.0;
+
 /// Consecutive step cuts after which stalled Newton iterations are no longer abandoned early.
 const STALL_CUTS: u32 = 2;
 
@@ -683,6 +816,7 @@ fn continuation(
     mut solve: impl FnMut(f64, &mut Vec<f64>, u32) -> Result<(), NewtonFailure>,
     mut on_failure_restore: impl FnMut(),
     mut on_success_commit: impl FnMut(&[f64], &[f64]),
+    mut past_limit_point: impl FnMut(f64, f64, &[f64]) -> Option<Vec<f64>>,
     stage: &'static str,
     unit: &'static str,
 ) -> Result<(), FemError> {
@@ -707,9 +841,16 @@ fn continuation(
                 cuts += 1;
                 if cuts > max_cuts && target < to {
                     // no equilibrium reachable by small steps (a limit point: the shell
-                    // snaps through): try the end of the increment directly, which lands
-                    // on the branch beyond the snap if Newton can reach it (what the
-                    // quasi-static sensor sees after the jump)
+                    // snaps through): follow the path past it to the increment's end
+                    if let Some(trial) = past_limit_point(done, to, state) {
+                        on_success_commit(state, &trial);
+                        *state = trial;
+                        done = to;
+                        continue;
+                    }
+                    on_failure_restore();
+                    // or, without a path, try the end of the increment directly, which
+                    // lands on the branch beyond the snap if Newton can reach it
                     let mut trial = state.clone();
                     if solve(to, &mut trial, cuts).is_ok() {
                         on_success_commit(state, &trial);
@@ -774,6 +915,7 @@ pub(crate) fn solve_stages(
             |p, state, _| cell.borrow_mut().solve_equilibrium(state, p).map(|_| ()),
             || {},
             |_: &[f64], _: &[f64]| {},
+            |_, _, _: &[f64]| None,
             "stage 1 (inflation)",
             "kPa",
         )?;
@@ -841,13 +983,22 @@ pub(crate) fn solve_stages(
                     .map(|c| c.multipliers.clone())
                     .collect();
                 let h_before = ind.clamp_z_dofs.first().map_or(0.0, |&d| -before[d]);
-                ind.previous = Some((h_before, before.to_vec()));
+                ind.previous = if std::mem::take(&mut ind.new_branch) {
+                    None
+                } else {
+                    Some((h_before, before.to_vec()))
+                };
                 let positions: Vec<[f64; 2]> = (0..ind.model.mesh.nodes.len())
                     .map(|n| ind.model.position(after, n))
                     .collect();
                 for c in &mut ind.model.contacts {
                     c.commit_slip_state(&|n: usize| positions[n]);
                 }
+            },
+            |from, to, s: &[f64]| {
+                let mut ind = ind_cell.borrow_mut();
+                ind.trace_snap_through(s, from, to, params.pressure_kpa, settings, apex_z0_mm)
+                    .ok()
             },
             "stage 2 (indentation)",
             "mm of tube travel",

@@ -147,13 +147,54 @@ pub enum StopReason {
 pub struct Solution {
     pub curve: Curve,
     pub stop: StopReason,
+    /// Equilibria past limit points of the tube travel (the shell snapping through), in
+    /// path order, h first rising to the limit, then falling and rising again (see
+    /// `Indentation::trace_snap_through`); empty when the travel never turns back. Under
+    /// the bench's travel control the sensor jumps across this part.
+    pub snap_through: Vec<crate::CurvePoint>,
     /// The stage-2 model (mesh, contact state, Newton statistics and attempt log).
     pub indentation: Indentation,
     /// Displacements of the last converged step (2 per node).
     pub displacement: Vec<f64>,
 }
 
+/// What the bench sees at a snap-through under travel control: at the limit travel the
+/// equilibrium it follows disappears and the shell jumps, at the same h, to the branch the
+/// traced path reaches again (before, after).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SnapThroughJump {
+    /// The tube travel at the limit point (the largest h before the path turns back).
+    pub h_mm: f64,
+    pub u_s_mm: [f64; 2],
+    pub a_mm: [f64; 2],
+    pub load_n: [f64; 2],
+}
+
 impl Solution {
+    /// The jump across the traced snap-through path, if there is one: the state at the
+    /// path's first maximum of h, and the state where h rises back to it (interpolated
+    /// linearly between the two path points around the crossing). Resolution: the path's
+    /// u_s step (0.01 mm).
+    pub fn snap_through_jump(&self) -> Option<SnapThroughJump> {
+        let path = &self.snap_through;
+        let peak = (0..path.len())
+            .find(|&k| path.get(k + 1).is_some_and(|next| next.h_mm < path[k].h_mm))?;
+        let h = path[peak].h_mm;
+        let valley =
+            (peak + 1..path.len()).min_by(|&i, &j| path[i].h_mm.total_cmp(&path[j].h_mm))?;
+        let k = (valley..path.len() - 1).find(|&k| path[k].h_mm < h && path[k + 1].h_mm >= h)?;
+        let (p, q) = (&path[k], &path[k + 1]);
+        let t = (h - p.h_mm) / (q.h_mm - p.h_mm);
+        let lerp = |x: f64, y: f64| x + t * (y - x);
+        let before = &path[peak];
+        Some(SnapThroughJump {
+            h_mm: h,
+            u_s_mm: [before.u_s_mm, lerp(p.u_s_mm, q.u_s_mm)],
+            a_mm: [before.a_mm, lerp(p.a_mm, q.a_mm)],
+            load_n: [before.load_n, lerp(p.load_n, q.load_n)],
+        })
+    }
+
     /// The curve if every load step converged, the reason otherwise.
     pub fn complete(self) -> Result<Curve, FemError> {
         match self.stop {
@@ -290,6 +331,7 @@ impl Simulation {
             },
         };
         Ok(Solution {
+            snap_through: indentation.snap_through_path.clone(),
             curve,
             stop,
             indentation,

@@ -1,0 +1,87 @@
+//! The unpressurised shell on a stiff sample snaps through: the tube's travel reaches a
+//! limit point and the equilibrium path turns back. `Simulation::solve` follows it with
+//! the apex displacement as the controlled quantity and lands on the far branch; the
+//! bench, under travel control, jumps across it.
+
+// Test helpers outside #[test] functions may unwrap too (clippy.toml allows it only inside them).
+#![allow(clippy::unwrap_used)]
+
+use fem_core::{CurveParams, Simulation, StopReason};
+
+fn solve(pressure_kpa: f64) -> fem_core::Solution {
+    let params = CurveParams {
+        sample_modulus_kpa: 1000.0,
+        pressure_kpa,
+        max_depth_mm: 1.25,
+        steps: 25,
+        ..Default::default()
+    };
+    Simulation::new(&params).solve().unwrap()
+}
+
+#[test]
+fn the_unpressurised_shell_snaps_through_along_a_traced_path() {
+    let solution = solve(0.0);
+    assert_eq!(solution.stop, StopReason::Completed);
+    let path = &solution.snap_through;
+    assert!(path.len() >= 10, "{} path points", path.len());
+    // the controlled quantity rises monotonically along the path...
+    assert!(path.windows(2).all(|w| w[1].u_s_mm > w[0].u_s_mm));
+    // ...while the travel first falls (the snap-back) and then rises past the step's end
+    let h_min = path.iter().map(|p| p.h_mm).fold(f64::INFINITY, f64::min);
+    let h_first = path[0].h_mm;
+    let h_last = path[path.len() - 1].h_mm;
+    assert!(
+        h_min < h_first - 5e-3,
+        "travel falls by {} mm",
+        h_first - h_min
+    );
+    assert!(h_last >= h_first, "the path rises past the limit again");
+    // neighbouring equilibria are close: a continuous path, not jumps between branches
+    // (0.01 mm u_s steps; a and P change by well under 1 % per step)
+    for w in path.windows(2) {
+        assert!((w[1].a_mm - w[0].a_mm).abs() < 0.01, "{w:?}");
+        assert!(
+            (w[1].load_n - w[0].load_n).abs() < 0.01 * w[0].load_n,
+            "{w:?}"
+        );
+    }
+    // what the bench sees: at the limit travel u_s and a jump up, the load drops
+    let jump = solution.snap_through_jump().unwrap();
+    assert!(jump.u_s_mm[1] - jump.u_s_mm[0] > 0.1, "{jump:?}");
+    assert!(jump.a_mm[1] > jump.a_mm[0], "{jump:?}");
+    assert!(jump.load_n[1] < jump.load_n[0], "{jump:?}");
+    // the curve's first step past the snap is the state the path reached: u_s on the far
+    // branch, interpolated along the path at that travel (to the augmentation tolerance
+    // and the path's linear interpolation over a 0.01 mm step)
+    let after = solution
+        .curve
+        .points
+        .iter()
+        .find(|p| p.h_mm > jump.h_mm)
+        .unwrap();
+    let k = (0..path.len() - 1)
+        .rev()
+        .find(|&k| path[k].h_mm <= after.h_mm && path[k + 1].h_mm >= after.h_mm);
+    if let Some(k) = k {
+        let (p, q) = (&path[k], &path[k + 1]);
+        let t = (after.h_mm - p.h_mm) / (q.h_mm - p.h_mm);
+        let u_s = p.u_s_mm + t * (q.u_s_mm - p.u_s_mm);
+        assert!(
+            (after.u_s_mm - u_s).abs() < 2e-3,
+            "{} vs {u_s}",
+            after.u_s_mm
+        );
+    } else {
+        // the path ended beyond the step: the landing is within one path step of its end
+        assert!((after.u_s_mm - path[path.len() - 1].u_s_mm).abs() < 0.02);
+    }
+}
+
+#[test]
+fn the_pressurised_shell_does_not_snap_through() {
+    let solution = solve(6.0);
+    assert_eq!(solution.stop, StopReason::Completed);
+    assert!(solution.snap_through.is_empty());
+    assert_eq!(solution.snap_through_jump(), None);
+}
