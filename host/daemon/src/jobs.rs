@@ -328,6 +328,13 @@ impl JobRun<'_> {
         self.record
             .write_json(pipeline::PRESSURE_CHOICE_FILE, &choice)?;
         let summary = choice_summary(&choice, &format!("{record_name}/{PROBE_DIR}"));
+        // The live curve moves to the measurement before the job says so: a page that
+        // clears its curve on the choice gets no late fit of the probe after it.
+        self.dt
+            .shared
+            .switch
+            .live
+            .start_run(self.id, choice.chosen_kpa);
         self.dt.shared.update_job(self.id, |j| {
             j.message = format!(
                 "pressure chosen: {} kPa (probe at {} kPa read {:.1} kPa)",
