@@ -155,6 +155,19 @@ async function run(browser) {
   check('the API\'s validation messages appear at their fields',
     depthErr.includes('outside') && repErr.includes('outside') && pErr === '', `${depthErr} | ${repErr}`);
 
+  // --- the automatic pressure choice: the pressure field becomes the probe's --------
+  await page.check('#pressure-auto');
+  const autoLabel = await page.textContent('#pressure-label');
+  await page.fill('input[name=pressure_kpa]', '40');
+  await page.click('#submit-experiment');
+  await page.waitForSelector('.field-error[data-field="probe_pressure_kpa"]:not(:empty)');
+  const probeErr = await page.textContent('.field-error[data-field="probe_pressure_kpa"]');
+  const marked = await page.$eval('input[name=pressure_kpa]', (i) => i.classList.contains('invalid'));
+  check('with "auto" the pressure field is the probe\'s and its error shows there',
+    autoLabel.includes('probe') && probeErr.includes('outside') && marked, `${autoLabel} | ${probeErr} | ${marked}`);
+  await page.uncheck('#pressure-auto');
+  await page.fill('input[name=pressure_kpa]', '6');
+
   // --- an experiment to the end ------------------------------------------------------
   await page.fill('input[name=depth_mm]', '1.2');
   await page.fill('input[name=repeats]', '2');
