@@ -155,6 +155,19 @@ async function run(browser) {
   check('the API\'s validation messages appear at their fields',
     depthErr.includes('outside') && repErr.includes('outside') && pErr === '', `${depthErr} | ${repErr}`);
 
+  // --- the automatic pressure choice: the pressure field becomes the probe's --------
+  await page.check('#pressure-auto');
+  const autoLabel = await page.textContent('#pressure-label');
+  await page.fill('input[name=pressure_kpa]', '40');
+  await page.click('#submit-experiment');
+  await page.waitForSelector('.field-error[data-field="probe_pressure_kpa"]:not(:empty)');
+  const probeErr = await page.textContent('.field-error[data-field="probe_pressure_kpa"]');
+  const marked = await page.$eval('input[name=pressure_kpa]', (i) => i.classList.contains('invalid'));
+  check('with "auto" the pressure field is the probe\'s and its error shows there',
+    autoLabel.includes('probe') && probeErr.includes('outside') && marked, `${autoLabel} | ${probeErr} | ${marked}`);
+  await page.uncheck('#pressure-auto');
+  await page.fill('input[name=pressure_kpa]', '6');
+
   // --- an experiment to the end ------------------------------------------------------
   await page.fill('input[name=depth_mm]', '1.2');
   await page.fill('input[name=repeats]', '2');
@@ -222,12 +235,42 @@ async function run(browser) {
   check('the record shows its fit and downloadable files', ['fit.json', 'curve.csv', 'meta.json'].every((f) => links.includes(f)),
     links.join(' '));
 
+  // --- an experiment at the automatic pressure ----------------------------------------
+  // (the simulated 200 kPa gelatin: the 6 kPa probe moves it to a higher calibrated one)
+  await page.check('#pressure-auto');
+  await page.fill('input[name=repeats]', '1');
+  await page.click('#submit-experiment');
+  const autoId = Number(await until('automatic-pressure experiment queued', async () => {
+    const id = await page.getAttribute('#form-result', 'data-job');
+    return Number(id) > jobId && id;
+  }, UI_MS));
+  const autoJob = await until('automatic-pressure experiment done', async () => {
+    const j = await apiGet(`/v1/experiments/${autoId}`);
+    return ['complete', 'partial', 'failed', 'cancelled'].includes(j.state) && j;
+  }, JOB_MS);
+  const chosen = autoJob.pressure_choice && autoJob.pressure_choice.chosen_kpa;
+  const autoLine = await until('the job line shows the choice', async () => {
+    const li = await page.$(`#jobs li[data-job="${autoId}"][data-chosen-kpa="${chosen}"]`);
+    return li && li.textContent();
+  }, UI_MS).catch(() => '');
+  check('an automatic-pressure job shows the probe and the chosen pressure',
+    autoJob.state === 'complete' && chosen > 6 && autoJob.fit && autoJob.fit.p_air_kpa === chosen
+      && autoLine.includes(`auto: ${chosen} kPa`) && autoLine.includes('probe at 6 kPa'),
+    `${autoJob.state} ${autoJob.message} | ${autoLine}`);
+  await until('its record listed first', async () =>
+    (await page.textContent('#record-list li a')) === autoJob.record, UI_MS).catch(() => {});
+  await page.click('#record-list li a'); // the newest record first
+  const recordChoice = await page.waitForSelector('#record-detail .record-pressure')
+    .then((e) => e.getAttribute('data-chosen-kpa')).catch(() => null);
+  check('its record shows the chosen pressure', Number(recordChoice) === chosen, `${recordChoice}`);
+  await page.uncheck('#pressure-auto');
+
   // --- the stop button mid-run -------------------------------------------------------
   await page.fill('input[name=repeats]', '6');
   await page.click('#submit-experiment');
   const stopId = Number(await until('second experiment queued', async () => {
     const id = await page.getAttribute('#form-result', 'data-job');
-    return Number(id) > jobId && id;
+    return Number(id) > autoId && id;
   }, UI_MS));
   await until('second experiment producing points', async () => {
     const j = await apiGet(`/v1/experiments/${stopId}`);

@@ -24,6 +24,7 @@ fn known_state() -> DashboardState {
             message: "indentation 2/3".into(),
             progress: 0.5,
             fit: None,
+            pressure_choice: None,
             submitted_unix_s: 0,
             finished_unix_s: None,
         },

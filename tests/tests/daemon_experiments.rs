@@ -80,7 +80,8 @@ fn calibrated(name: &str) -> Bench {
 
 fn short_run(repeats: u32) -> ExperimentRequest {
     ExperimentRequest {
-        pressure_kpa: 6.0,
+        pressure_kpa: 6.0.into(),
+        probe_pressure_kpa: None,
         start_mm: 0.8,
         depth_mm: 1.2,
         speed_mm_per_s: 2.0,

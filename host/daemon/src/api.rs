@@ -40,12 +40,76 @@ fn default_rate() -> u16 {
     2000
 }
 
+/// The internal pressures an experiment may run at (kPa).
+pub const EXPERIMENT_PRESSURE_KPA: std::ops::RangeInclusive<f64> = 0.5..=15.0;
+
+/// The probe pressure of the automatic choice when the request names none (the paper's
+/// working pressure).
+pub const DEFAULT_PROBE_KPA: f64 = 6.0;
+
+/// An experiment's internal pressure: a set point, or the automatic choice (`"auto"`: a
+/// one-indentation probe, then the measurement at the calibrated pressure where the lookup
+/// table predicts the smallest modulus error for the sample the probe found). In JSON a
+/// number of kPa or the string `"auto"`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum PressureSetting {
+    Kpa(f64),
+    Auto,
+}
+
+impl From<f64> for PressureSetting {
+    fn from(kpa: f64) -> Self {
+        Self::Kpa(kpa)
+    }
+}
+
+impl Serialize for PressureSetting {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        match self {
+            Self::Kpa(v) => s.serialize_f64(*v),
+            Self::Auto => s.serialize_str("auto"),
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for PressureSetting {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct Visitor;
+        impl serde::de::Visitor<'_> for Visitor {
+            type Value = PressureSetting;
+            fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str("a pressure in kPa or \"auto\"")
+            }
+            fn visit_f64<E: serde::de::Error>(self, v: f64) -> Result<Self::Value, E> {
+                Ok(PressureSetting::Kpa(v))
+            }
+            fn visit_i64<E: serde::de::Error>(self, v: i64) -> Result<Self::Value, E> {
+                Ok(PressureSetting::Kpa(v as f64))
+            }
+            fn visit_u64<E: serde::de::Error>(self, v: u64) -> Result<Self::Value, E> {
+                Ok(PressureSetting::Kpa(v as f64))
+            }
+            fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<Self::Value, E> {
+                if v.eq_ignore_ascii_case("auto") {
+                    Ok(PressureSetting::Auto)
+                } else {
+                    Err(E::invalid_value(serde::de::Unexpected::Str(v), &self))
+                }
+            }
+        }
+        d.deserialize_any(Visitor)
+    }
+}
+
 /// `POST /v1/experiments`: an indentation experiment (see `experiment::IndentationPlan`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ExperimentRequest {
-    /// Internal (shell) gauge pressure, kPa.
-    pub pressure_kpa: f64,
+    /// Internal (shell) gauge pressure: kPa, or `"auto"`.
+    pub pressure_kpa: PressureSetting,
+    /// With `"pressure_kpa": "auto"`: the probe's pressure (default [`DEFAULT_PROBE_KPA`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub probe_pressure_kpa: Option<f64>,
     /// Stage position where each cycle starts, mm from the stage's zero (above the sample).
     #[serde(default = "default_start_mm")]
     pub start_mm: f64,
@@ -82,11 +146,27 @@ impl ExperimentRequest {
                 });
             }
         };
-        check(
-            self.pressure_kpa.is_finite() && (0.5..=15.0).contains(&self.pressure_kpa),
-            "pressure_kpa",
-            format!("{} is outside 0.5..=15 kPa", self.pressure_kpa),
-        );
+        let in_range = |p: f64| p.is_finite() && EXPERIMENT_PRESSURE_KPA.contains(&p);
+        match (self.pressure_kpa, self.probe_pressure_kpa) {
+            (PressureSetting::Kpa(p), probe) => {
+                check(
+                    in_range(p),
+                    "pressure_kpa",
+                    format!("{p} is outside 0.5..=15 kPa"),
+                );
+                check(
+                    probe.is_none(),
+                    "probe_pressure_kpa",
+                    "only with \"pressure_kpa\": \"auto\"".into(),
+                );
+            }
+            (PressureSetting::Auto, Some(p)) => check(
+                in_range(p),
+                "probe_pressure_kpa",
+                format!("{p} is outside 0.5..=15 kPa"),
+            ),
+            (PressureSetting::Auto, None) => {}
+        }
         check(
             self.start_mm.is_finite() && (-5.0..=20.0).contains(&self.start_mm),
             "start_mm",
@@ -121,6 +201,14 @@ impl ExperimentRequest {
             Ok(())
         } else {
             Err(errors)
+        }
+    }
+
+    /// The pressure of the first run: the set one, or the automatic choice's probe.
+    pub fn first_pressure_kpa(&self) -> f64 {
+        match self.pressure_kpa {
+            PressureSetting::Kpa(p) => p,
+            PressureSetting::Auto => self.probe_pressure_kpa.unwrap_or(DEFAULT_PROBE_KPA),
         }
     }
 }
@@ -171,6 +259,33 @@ pub struct FitSummary {
     pub p_air_kpa: f64,
 }
 
+/// What the automatic pressure choice decided (also `pressure_choice.json` in the record).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PressureChoiceSummary {
+    /// The probe: its pressure, its modulus estimate and interval, and its record (the
+    /// experiment's record's `probe` folder).
+    pub probe_kpa: f64,
+    pub probe_modulus_kpa: f64,
+    pub probe_ci95_kpa: [f64; 2],
+    pub probe_record: String,
+    /// The pressure the measurement runs at and the relative standard error of the modulus
+    /// the table predicts there.
+    pub chosen_kpa: f64,
+    pub predicted_relative_se: f64,
+    /// Every pressure considered: the table's pressures within the experiment range that
+    /// the calibration covers.
+    pub candidates: Vec<PressureCandidate>,
+}
+
+/// One pressure the automatic choice considered.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct PressureCandidate {
+    pub p_air_kpa: f64,
+    pub predicted_relative_se: f64,
+    /// Largest apex displacement the table covers there for the probe's modulus.
+    pub u_s_max_mm: f64,
+}
+
 /// One queued, running or finished job.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Job {
@@ -185,6 +300,9 @@ pub struct Job {
     /// 0..1 while running.
     pub progress: f64,
     pub fit: Option<FitSummary>,
+    /// An experiment with `"pressure_kpa": "auto"`, once its probe has chosen.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pressure_choice: Option<PressureChoiceSummary>,
     pub submitted_unix_s: u64,
     pub finished_unix_s: Option<u64>,
 }
@@ -388,4 +506,77 @@ pub fn unix_us() -> u64 {
         .duration_since(std::time::UNIX_EPOCH)
         .map(|d| d.as_micros() as u64)
         .unwrap_or(0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn request(json: &str) -> Result<ExperimentRequest, String> {
+        serde_json::from_str(json).map_err(|e| e.to_string())
+    }
+
+    fn bad_fields(json: &str) -> Vec<String> {
+        match request(json).map(|r| r.validate()) {
+            Ok(Err(fields)) => fields.into_iter().map(|f| f.field).collect(),
+            other => panic!("{json}: {other:?}"),
+        }
+    }
+
+    #[test]
+    fn the_pressure_is_a_number_or_auto() {
+        let set = request(r#"{"pressure_kpa": 6}"#).unwrap();
+        assert_eq!(set.pressure_kpa, PressureSetting::Kpa(6.0));
+        assert_eq!((set.validate(), set.first_pressure_kpa()), (Ok(()), 6.0));
+        let auto = request(r#"{"pressure_kpa": "auto"}"#).unwrap();
+        assert_eq!(auto.pressure_kpa, PressureSetting::Auto);
+        assert_eq!(auto.validate(), Ok(()));
+        assert_eq!(auto.first_pressure_kpa(), DEFAULT_PROBE_KPA);
+        let probe = request(r#"{"pressure_kpa": "AUTO", "probe_pressure_kpa": 10}"#).unwrap();
+        assert_eq!(
+            (probe.validate(), probe.first_pressure_kpa()),
+            (Ok(()), 10.0)
+        );
+        // round trip: a set pressure stays a number, the choice the string
+        let text = serde_json::to_string(&probe).unwrap();
+        assert!(text.contains(r#""pressure_kpa":"auto""#), "{text}");
+        assert_eq!(request(&text).unwrap(), probe);
+        let text = serde_json::to_string(&set).unwrap();
+        assert!(text.contains(r#""pressure_kpa":6.0"#), "{text}");
+        assert!(!text.contains("probe_pressure_kpa"), "{text}");
+    }
+
+    #[test]
+    fn other_words_and_unknown_fields_are_refused_by_name() {
+        let e = request(r#"{"pressure_kpa": "high"}"#).unwrap_err();
+        assert!(e.contains("\"auto\"") && e.contains("high"), "{e}");
+        let e = request(r#"{"pressure_kpa": "auto", "probe_kpa": 6}"#).unwrap_err();
+        assert!(e.contains("probe_kpa"), "{e}");
+        assert!(
+            request(r#"{"depth_mm": 1}"#)
+                .unwrap_err()
+                .contains("pressure_kpa")
+        );
+    }
+
+    #[test]
+    fn the_probe_pressure_is_checked_at_its_own_field() {
+        assert_eq!(
+            bad_fields(r#"{"pressure_kpa": "auto", "probe_pressure_kpa": 30}"#),
+            ["probe_pressure_kpa"]
+        );
+        assert_eq!(
+            bad_fields(r#"{"pressure_kpa": "auto", "probe_pressure_kpa": 0.2, "repeats": 0}"#),
+            ["probe_pressure_kpa", "repeats"]
+        );
+        // a probe pressure belongs to the automatic choice only
+        assert_eq!(
+            bad_fields(r#"{"pressure_kpa": 6, "probe_pressure_kpa": 6}"#),
+            ["probe_pressure_kpa"]
+        );
+        assert_eq!(
+            bad_fields(r#"{"pressure_kpa": 40, "probe_pressure_kpa": 6}"#),
+            ["pressure_kpa", "probe_pressure_kpa"]
+        );
+    }
 }

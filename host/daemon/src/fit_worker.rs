@@ -101,12 +101,14 @@ fn run(lut: &Lut, rx: Receiver<FitRequest>, switch: &StopSwitch) {
         let result = fit_modulus(&model, &request.points, FitOptions::default());
         if let Ok(fit) = &result {
             let (fit, model) = (summary(fit), model_curve(&model, fit, &request.points));
-            switch.live.fit(fit, &model, request.final_fit);
-            let _ = switch.events.send(Event::Fit {
-                fit,
-                model,
-                final_fit: request.final_fit,
-            });
+            // (a late fit of an earlier run of the experiment is dropped)
+            if switch.live.fit(fit, &model, request.final_fit) {
+                let _ = switch.events.send(Event::Fit {
+                    fit,
+                    model,
+                    final_fit: request.final_fit,
+                });
+            }
         }
     }
 }

@@ -19,6 +19,11 @@ pub const MAX_POINTS: usize = 100_000;
 pub struct LiveCurve {
     /// The experiment the points belong to (the newest one started).
     pub job: Option<u64>,
+    /// The internal pressure of the run the points belong to, once it has started (with
+    /// `"pressure_kpa": "auto"` first the probe's, then the chosen one: the curve starts
+    /// afresh for the measurement).
+    #[serde(default)]
+    pub pressure_kpa: Option<f64>,
     /// `[u_s_mm, a_mm, cycle]`, in the order they were paired.
     pub points: Vec<[f64; 3]>,
     /// The newest running (or the final) fit.
@@ -51,6 +56,19 @@ impl LiveBoard {
         });
     }
 
+    /// A run of the current experiment starts at `pressure_kpa`: the curve is emptied and
+    /// from now on takes only fits at that pressure (a running fit of an earlier run that
+    /// finishes late is not this run's).
+    pub fn start_run(&self, job: u64, pressure_kpa: f64) {
+        self.with(|c| {
+            *c = LiveCurve {
+                job: Some(job),
+                pressure_kpa: Some(pressure_kpa),
+                ..LiveCurve::default()
+            }
+        });
+    }
+
     pub fn point(&self, u_s_mm: f64, a_mm: f64, cycle: u32) {
         self.with(|c| {
             if c.points.len() < MAX_POINTS {
@@ -59,16 +77,26 @@ impl LiveBoard {
         });
     }
 
-    pub fn fit(&self, fit: FitSummary, model: &[[f64; 2]], final_fit: bool) {
+    /// Takes a fit; `false` if it is not the current run's (another pressure) or is a late
+    /// running fit after the final one, so it should not be published either.
+    pub fn fit(&self, fit: FitSummary, model: &[[f64; 2]], final_fit: bool) -> bool {
+        let mut taken = false;
         self.with(|c| {
             // A late running fit never replaces the final one.
             if c.final_fit && !final_fit {
                 return;
             }
+            if c.pressure_kpa
+                .is_some_and(|p| (p - fit.p_air_kpa).abs() > 1e-9)
+            {
+                return;
+            }
             c.fit = Some(fit);
             c.model = model.to_vec();
             c.final_fit = final_fit;
+            taken = true;
         });
+        taken
     }
 
     pub fn snapshot(&self) -> LiveCurve {
@@ -112,5 +140,30 @@ mod tests {
                 ..LiveCurve::default()
             }
         );
+    }
+
+    #[test]
+    fn a_new_run_takes_only_fits_at_its_own_pressure() {
+        let board = LiveBoard::default();
+        board.start(3);
+        board.start_run(3, 6.0);
+        board.point(0.1, 1.0, 0);
+        assert!(board.fit(summary(900.0), &[], false));
+        // the measurement moves to 15 kPa: the probe's curve goes
+        board.start_run(3, 15.0);
+        let c = board.snapshot();
+        assert_eq!(
+            (c.pressure_kpa, c.points.len(), c.fit),
+            (Some(15.0), 0, None)
+        );
+        // a late running fit of the probe (6 kPa) is not taken
+        assert!(!board.fit(summary(880.0), &[], false));
+        assert_eq!(board.snapshot().fit, None);
+        let at_15 = FitSummary {
+            p_air_kpa: 15.0,
+            ..summary(700.0)
+        };
+        assert!(board.fit(at_15, &[], true));
+        assert_eq!(board.snapshot().fit, Some(at_15));
     }
 }

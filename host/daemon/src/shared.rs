@@ -132,6 +132,7 @@ impl Shared {
                 message: "queued".into(),
                 progress: 0.0,
                 fit: None,
+                pressure_choice: None,
                 submitted_unix_s: unix_now_s(),
                 finished_unix_s: None,
             };

@@ -239,9 +239,10 @@ pub const PROBE_REPEATS: u32 = 1;
 /// What the automatic pressure choice decided.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct PressureChoice {
-    /// The probe's pressure and its modulus estimate.
+    /// The probe's pressure and its modulus estimate (with its 95 % interval).
     pub probe_kpa: f64,
     pub probe_modulus_kpa: f64,
+    pub probe_ci95_kpa: [f64; 2],
     /// The chosen pressure and the predicted relative standard error there.
     pub chosen_kpa: f64,
     pub predicted_relative_se: f64,
@@ -249,44 +250,29 @@ pub struct PressureChoice {
     pub candidates: Vec<fit::PressureSensitivity>,
 }
 
-/// `--pressure auto`: a short probe indentation ([`PROBE_REPEATS`]) at `plan.pressure_kpa`,
-/// recorded in `probe_record`, fitted; then the experiment at the pressure where the table
-/// predicts the smallest error of the modulus (`fit::recommend_pressure`, with the probe's
-/// residual noise and point density), among the pressures the calibration covers. Stiff
-/// samples change the contact radius little at low pressure and need a higher one.
-#[allow(clippy::too_many_arguments)]
-pub fn run_at_recommended_pressure<'a>(
-    link: &mut Link,
-    calibration: &CalibrationRecord,
-    plan: &IndentationPlan,
-    probe_record: &RecordDir,
-    record: &RecordDir,
-    model: &LutModel,
-    lut: &LutInfo,
-    context: &RunContext,
-    progress: &indicatif::ProgressBar,
-    failure_status: FailureStatus<'_>,
-    mut make_radius: impl FnMut(
-        &mut Link,
-        PxPerMmCalibration,
-    ) -> Result<Box<dyn RadiusSource + 'a>, String>,
-) -> Result<(ExperimentReport, PressureChoice), RunError> {
-    let probe_plan = IndentationPlan {
+/// The file in the measurement's record that keeps the [`PressureChoice`].
+pub const PRESSURE_CHOICE_FILE: &str = "pressure_choice.json";
+
+/// The probe run of the automatic choice: `plan` with [`PROBE_REPEATS`] indentations.
+pub fn probe_plan(plan: &IndentationPlan) -> IndentationPlan {
+    IndentationPlan {
         repeats: PROBE_REPEATS,
         ..*plan
-    };
-    let probe = run_experiment(
-        link,
-        calibration,
-        &probe_plan,
-        probe_record,
-        model,
-        lut,
-        context,
-        progress,
-        failure_status,
-        &mut make_radius,
-    )?;
+    }
+}
+
+/// The pressure to measure at after `probe` (run with [`probe_plan`] of `plan`): where the
+/// table predicts the smallest error of the modulus (`fit::recommend_pressure`, with the
+/// probe's residual noise and the main run's point density, `plan.repeats` times the
+/// probe's), among the table's pressures that `calibration` has a proximity calibration
+/// for and that `allowed` accepts (the caller's pressure limits).
+pub fn choose_pressure(
+    model: &LutModel,
+    calibration: &CalibrationRecord,
+    plan: &IndentationPlan,
+    probe: &ExperimentReport,
+    allowed: impl Fn(f64) -> bool,
+) -> Result<PressureChoice, RunError> {
     let u_span = probe
         .fit_points
         .iter()
@@ -308,18 +294,19 @@ pub fn run_at_recommended_pressure<'a>(
     );
     let candidates: Vec<fit::PressureSensitivity> = all
         .into_iter()
-        .filter(|s| calibration.proximity_at(s.p_air_kpa).is_some())
+        .filter(|s| allowed(s.p_air_kpa) && calibration.proximity_at(s.p_air_kpa).is_some())
         .collect();
     let best = candidates
         .iter()
         .min_by(|a, b| a.predicted_relative_se.total_cmp(&b.predicted_relative_se))
         .ok_or_else(|| RunError::NoProximity {
             pressure_kpa: plan.pressure_kpa,
-            have: "no table pressure with a proximity calibration".into(),
+            have: "no allowed table pressure with a proximity calibration".into(),
         })?;
     let choice = PressureChoice {
         probe_kpa: plan.pressure_kpa,
         probe_modulus_kpa: probe.modulus_kpa,
+        probe_ci95_kpa: probe.ci95_kpa,
         chosen_kpa: best.p_air_kpa,
         predicted_relative_se: best.predicted_relative_se,
         candidates: candidates.clone(),
@@ -329,6 +316,55 @@ pub fn run_at_recommended_pressure<'a>(
         chosen_kpa = choice.chosen_kpa,
         "pressure chosen"
     );
+    Ok(choice)
+}
+
+/// The measurement's note about the choice (in its report).
+pub fn choice_note(choice: &PressureChoice) -> String {
+    format!(
+        "pressure chosen automatically: {} kPa (predicted relative error {:.2} %), from a probe at {} kPa reading {:.1} kPa",
+        choice.chosen_kpa,
+        100.0 * choice.predicted_relative_se,
+        choice.probe_kpa,
+        choice.probe_modulus_kpa
+    )
+}
+
+/// `--pressure auto`: a short probe indentation ([`probe_plan`]) at `plan.pressure_kpa`,
+/// recorded in `probe_record`, fitted; then the experiment at the pressure
+/// [`choose_pressure`] picks, its record keeping the choice ([`PRESSURE_CHOICE_FILE`]).
+/// Stiff samples change the contact radius little at low pressure and need a higher one.
+#[allow(clippy::too_many_arguments)]
+pub fn run_at_recommended_pressure<'a>(
+    link: &mut Link,
+    calibration: &CalibrationRecord,
+    plan: &IndentationPlan,
+    probe_record: &RecordDir,
+    record: &RecordDir,
+    model: &LutModel,
+    lut: &LutInfo,
+    context: &RunContext,
+    progress: &indicatif::ProgressBar,
+    failure_status: FailureStatus<'_>,
+    mut make_radius: impl FnMut(
+        &mut Link,
+        PxPerMmCalibration,
+    ) -> Result<Box<dyn RadiusSource + 'a>, String>,
+) -> Result<(ExperimentReport, PressureChoice), RunError> {
+    let probe = run_experiment(
+        link,
+        calibration,
+        &probe_plan(plan),
+        probe_record,
+        model,
+        lut,
+        context,
+        progress,
+        failure_status,
+        &mut make_radius,
+    )?;
+    let choice = choose_pressure(model, calibration, plan, &probe, |_| true)?;
+    record.write_json(PRESSURE_CHOICE_FILE, &choice)?;
     let main_plan = IndentationPlan {
         pressure_kpa: choice.chosen_kpa,
         ..*plan
@@ -345,12 +381,6 @@ pub fn run_at_recommended_pressure<'a>(
         failure_status,
         &mut make_radius,
     )?;
-    report.notes.push(format!(
-        "pressure chosen automatically: {} kPa (predicted relative error {:.2} %), from a probe at {} kPa reading {:.1} kPa",
-        choice.chosen_kpa,
-        100.0 * choice.predicted_relative_se,
-        choice.probe_kpa,
-        choice.probe_modulus_kpa
-    ));
+    report.notes.push(choice_note(&choice));
     Ok((report, choice))
 }

@@ -191,7 +191,8 @@ fn main() {
     measure("idle, streaming 2 kHz, 60 fps frames drained", &rx);
     let job = client
         .submit(&ExperimentRequest {
-            pressure_kpa: 6.0,
+            pressure_kpa: 6.0.into(),
+            probe_pressure_kpa: None,
             start_mm: 0.8,
             depth_mm: 1.2,
             speed_mm_per_s: 0.5,

@@ -3,7 +3,7 @@
 use std::process::ExitCode;
 
 use clap::Args;
-use daemon::api::{Event, ExperimentRequest};
+use daemon::api::{Event, ExperimentRequest, PressureSetting};
 
 use super::status::DaemonAddr;
 
@@ -11,9 +11,14 @@ use super::status::DaemonAddr;
 pub struct RunArgs {
     #[command(flatten)]
     daemon: DaemonAddr,
-    /// Internal gauge pressure (kPa).
-    #[arg(long, default_value_t = 6.0)]
-    pressure: f64,
+    /// Internal gauge pressure (kPa), or `auto`: a one-indentation probe (at
+    /// --probe-pressure), then the measurement at the calibrated pressure where the modulus
+    /// is measured best.
+    #[arg(long, default_value = "6", value_parser = parse_pressure)]
+    pressure: PressureSetting,
+    /// The probe's pressure with `--pressure auto` (kPa; default 6).
+    #[arg(long)]
+    probe_pressure: Option<f64>,
     /// Stage position where each cycle starts (mm from the stage zero, above the sample).
     #[arg(long, default_value_t = 0.8)]
     start: f64,
@@ -40,6 +45,16 @@ pub struct RunArgs {
     detach: bool,
 }
 
+/// `--pressure`: kPa or `auto`.
+fn parse_pressure(text: &str) -> Result<PressureSetting, String> {
+    if text.eq_ignore_ascii_case("auto") {
+        return Ok(PressureSetting::Auto);
+    }
+    text.parse::<f64>()
+        .map(PressureSetting::Kpa)
+        .map_err(|_| format!("`{text}` is neither a pressure in kPa nor `auto`"))
+}
+
 pub fn run(args: RunArgs) -> ExitCode {
     let client = match args.daemon.client() {
         Ok(c) => c,
@@ -50,6 +65,7 @@ pub fn run(args: RunArgs) -> ExitCode {
     };
     let request = ExperimentRequest {
         pressure_kpa: args.pressure,
+        probe_pressure_kpa: args.probe_pressure,
         start_mm: args.start,
         depth_mm: args.depth,
         speed_mm_per_s: args.speed,

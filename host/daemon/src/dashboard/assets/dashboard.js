@@ -226,13 +226,34 @@ function showFit() {
   $('fit-state').dataset.final = state.finalFit ? 'true' : 'false';
 }
 
+// The pressure an experiment job runs at now: the set one, or with "auto" the probe's until
+// the choice is made, then the chosen one.
+function runPressure(j) {
+  const e = j.experiment;
+  if (!e) return null;
+  if (typeof e.pressure_kpa === 'number') return e.pressure_kpa;
+  if (j.pressure_choice) return j.pressure_choice.chosen_kpa;
+  return typeof e.probe_pressure_kpa === 'number' ? e.probe_pressure_kpa : 6;
+}
+
 // While an experiment runs the daemon does not poll the device's status (the job owns the
 // link): its setpoint is the experiment's pressure.
 function currentSetpoint() {
   for (const j of state.jobs.values()) {
-    if (j.state === 'running' && j.experiment) return j.experiment.pressure_kpa;
+    if (j.state === 'running' && j.experiment) return runPressure(j);
   }
   return state.setpoint;
+}
+
+// The pressure part of a job's line: "6 kPa", "auto: probe at 6 kPa", or "auto: 15 kPa
+// (probe at 6 kPa read 640.2 kPa, predicted error 1.3 %)".
+function pressureText(j) {
+  const e = j.experiment;
+  if (!e) return '';
+  if (typeof e.pressure_kpa === 'number') return `${e.pressure_kpa} kPa`;
+  const c = j.pressure_choice;
+  if (!c) return `auto: probe at ${runPressure(j)} kPa`;
+  return `auto: ${c.chosen_kpa} kPa (probe at ${c.probe_kpa} kPa read ${c.probe_modulus_kpa.toFixed(1)} kPa, predicted error ${(100 * c.predicted_relative_se).toFixed(1)} %)`;
 }
 
 const handlers = {
@@ -263,8 +284,11 @@ const handlers = {
   job(e) {
     const j = e.job;
     const prev = state.jobs.get(j.id);
-    if (j.kind === 'experiment' && j.state === 'running' && (!prev || prev.state !== 'running')
-        && state.curveJob !== j.id) {
+    const newRun = j.kind === 'experiment' && j.state === 'running'
+      && (((!prev || prev.state !== 'running') && state.curveJob !== j.id)
+        // the automatic choice was made: the measurement's curve starts afresh
+        || (j.pressure_choice && prev && !prev.pressure_choice));
+    if (newRun) {
       state.curveJob = j.id; state.points = []; state.model = []; state.fit = null; state.finalFit = false;
       $('curve-job').textContent = String(j.id);
       showFit();
@@ -367,6 +391,8 @@ function showJobs() {
     li.dataset.job = String(j.id);
     li.dataset.state = j.state;
     let text = `#${j.id} ${j.kind} ${j.state}`;
+    if (j.experiment) text += ` at ${pressureText(j)}`;
+    if (j.pressure_choice) li.dataset.chosenKpa = String(j.pressure_choice.chosen_kpa);
     if (j.state === 'running') text += ` ${(j.progress * 100).toFixed(0)} %`;
     if (j.fit && !(j.message || '').includes('E2')) text += ` — E2 ${j.fit.modulus_kpa.toFixed(1)} kPa (${j.fit.ci95_kpa[0].toFixed(1)} .. ${j.fit.ci95_kpa[1].toFixed(1)})`;
     if (j.message) text += ` — ${j.message}`;
@@ -414,6 +440,19 @@ async function showRecord(name) {
     p.textContent = fit && fit.modulus_kpa !== undefined
       ? `E2 = ${Number(fit.modulus_kpa).toFixed(1)} kPa` + (fit.ci95_kpa ? ` (95 % CI ${Number(fit.ci95_kpa[0]).toFixed(1)} .. ${Number(fit.ci95_kpa[1]).toFixed(1)} kPa)` : '')
       : 'fit.json';
+    box.appendChild(p);
+  }
+  if (files.includes('pressure_choice.json')) {
+    const c = await api('GET', `/v1/records/${encodeURIComponent(name)}/pressure_choice.json`);
+    const p = document.createElement('p');
+    p.className = 'record-pressure';
+    const d = c.data;
+    if (c.ok && d && typeof d.chosen_kpa === 'number') {
+      p.dataset.chosenKpa = String(d.chosen_kpa);
+      p.textContent = `pressure chosen automatically: ${d.chosen_kpa} kPa (predicted error ${(100 * d.predicted_relative_se).toFixed(1)} %); probe at ${d.probe_kpa} kPa read ${Number(d.probe_modulus_kpa).toFixed(1)} kPa (record ${name}/probe)`;
+    } else {
+      p.textContent = 'pressure_choice.json';
+    }
     box.appendChild(p);
   }
   for (const file of files.filter((f) => f.endsWith('.svg'))) {
@@ -480,6 +519,17 @@ function resync() {
 
 // ---- the experiment form -----------------------------------------------------------
 
+// The input a request field comes from, where the names differ.
+const FIELD_INPUT = { probe_pressure_kpa: 'pressure_kpa' };
+
+function showPressureMode() {
+  const auto = $('pressure-auto').checked;
+  $('pressure-label').textContent = auto ? 'probe pressure (kPa)' : 'pressure (kPa)';
+  $('pressure-auto-help').hidden = !auto;
+}
+$('pressure-auto').addEventListener('change', showPressureMode);
+showPressureMode();
+
 $('experiment-form').addEventListener('submit', async (ev) => {
   ev.preventDefault();
   const form = ev.target;
@@ -488,12 +538,18 @@ $('experiment-form').addEventListener('submit', async (ev) => {
   const body = {};
   for (const input of form.querySelectorAll('input')) {
     const v = input.value.trim();
+    if (input.type === 'checkbox') continue;
     if (input.type === 'number') {
       if (v === '') continue; // the API's default
       body[input.name] = Number(v);
     } else {
       body[input.name] = v;
     }
+  }
+  if ($('pressure-auto').checked) {
+    // The pressure field then sets the probe's pressure.
+    if (body.pressure_kpa !== undefined) body.probe_pressure_kpa = body.pressure_kpa;
+    body.pressure_kpa = 'auto';
   }
   $('form-result').textContent = 'submitting…';
   $('form-result').className = '';
@@ -514,7 +570,7 @@ $('experiment-form').addEventListener('submit', async (ev) => {
   for (const f of (r.data && r.data.fields) || []) {
     const span = form.querySelector(`.field-error[data-field="${f.field}"]`);
     if (span) span.textContent = f.reason;
-    const input = form.querySelector(`input[name="${f.field}"]`);
+    const input = form.querySelector(`input[name="${FIELD_INPUT[f.field] || f.field}"]`);
     if (input) input.classList.add('invalid');
   }
 });
