@@ -291,7 +291,7 @@ pub struct Indentation {
     /// Equilibria traced past limit points of the tube travel (snap-throughs), in path
     /// order; see [`Indentation::trace_snap_through`].
     pub snap_through_path: Vec<CurvePoint>,
-    /// Set when the last committed step landed on a new branch: the secant predictor must
+    /// Set when the last committed step reached a new branch: the secant predictor must
     /// not extrapolate the jump.
     new_branch: bool,
 }
