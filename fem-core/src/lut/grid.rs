@@ -159,14 +159,15 @@ fn round_significant(v: f64, digits: usize) -> f64 {
 }
 
 impl LutGrid {
-    /// The shipped default grid: E2 log-spaced 10–1000 kPa (6 per decade), p_air 0, 6, 10,
-    /// 15, 20, 30 kPa, the paper's gelatin sample, frictionless neo-Hookean, h to 2 mm in 40
-    /// steps, production mesh.
+    /// The shipped default grid: E2 log-spaced 10–1468 kPa (6 per decade; one node beyond
+    /// 1000 kPa so that samples up to 1000 kPa fit inside the table, not at its edge),
+    /// p_air 0, 6, 10, 15, 20, 30 kPa, the paper's gelatin sample, frictionless
+    /// neo-Hookean, h to 2 mm in 40 steps, production mesh.
     pub fn default_grid() -> Self {
         Self::with_axes(
             "default",
             CurveParams::default(),
-            log_spaced(10.0, 1000.0, 13),
+            log_spaced(10.0, 10.0 * 10f64.powf(13.0 / 6.0), 14),
             vec![0.0, 6.0, 10.0, 15.0, 20.0, 30.0],
         )
     }
@@ -453,7 +454,8 @@ mod tests {
         let g = LutGrid::default_grid();
         g.validate().unwrap();
         assert_eq!(g.modulus_kpa.first(), Some(&10.0));
-        assert_eq!(g.modulus_kpa.last(), Some(&1000.0));
+        assert_eq!(g.modulus_kpa.last(), Some(&1468.0));
+        assert!(g.modulus_kpa.contains(&1000.0));
         for p in [0.0, 6.0, 10.0, 15.0, 20.0, 30.0] {
             assert!(g.pressure_kpa.contains(&p));
         }
