@@ -116,8 +116,8 @@ pub fn effect_base_params() -> CurveParams {
     }
 }
 
-/// The grid of the table that varies `axis`: E2 10–1000 kPa (13 log-spaced, as the default
-/// table; friction: 46.4–681 kPa) x p_air 6 and 15 kPa (thickness: [`BASE_PRESSURES_KPA`])
+/// The grid of the table that varies `axis`: E2 10–1000 kPa (13 log-spaced, the default
+/// table's nodes up to 1000 kPa; friction: 46.4–681 kPa) x p_air 6 and 15 kPa (thickness: [`BASE_PRESSURES_KPA`])
 /// x the axis values.
 pub fn effect_grid(axis: EffectAxis) -> LutGrid {
     let mut grid = LutGrid::with_axes(
