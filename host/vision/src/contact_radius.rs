@@ -43,8 +43,8 @@ pub struct ContactRadiusConfig {
     pub sectors: usize,
     /// Pixels at or above this grey level (in either frame) are ignored.
     pub saturation_level: u8,
-    /// Reference pixels brighter than this multiple of the reference's median are treated
-    /// as the apex mirror and ignored.
+    /// Reference pixels brighter than this multiple of the reference's 95th-percentile
+    /// block level are treated as the apex mirror and ignored.
     pub mirror_ratio: f64,
     /// Eccentricity above which the contact is flagged as tilted (0.35 = 20 degrees).
     pub tilt_eccentricity: f64,
@@ -92,12 +92,14 @@ pub struct ContactDisc {
 }
 
 /// Result for one frame. `contact` is false when no contact disc is found or its edge
-/// cannot be measured (within a few px of the apex mirror's rim, or a measurement that
-/// disagrees with the detection); `quality` is 0 then, else in (0, 1]:
+/// cannot be measured (the edge behind the apex mirror on more than half the rim, the
+/// inner level ring mostly covered by the mirror, or a measurement that disagrees with the
+/// detection); `quality` is 0 then, else in (0, 1]:
 /// `1 / (1 + (radius_sigma_px / 0.1)^2)` (0.5 when the predicted error equals the 0.1 px
 /// target) times `1 / (1 + max(0, chi - 2)^2)` where chi is the sector radii's RMS about
 /// the ellipse over their predicted noise (an irregular, non-elliptical edge lowers it),
-/// times the visible fraction of the band.
+/// times the fraction of the rim whose edge is seen (inside the image, not behind the apex
+/// mirror).
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct ContactRadius {
     pub contact: bool,
@@ -120,13 +122,9 @@ pub enum VisionError {
 
 const BLOCK: usize = 4;
 
-/// Narrowest inner level ring next to the apex mirror, px (a 3 px ring around a 50 px
-/// contact still holds ~900 pixels for the level plane).
-const MIN_LEVEL_RING_PX: f64 = 3.0;
-/// Narrowest band next to the mirror, as a fraction of the configured half width: 4 px is
-/// 1.6 blur sigmas at the default 2.5 px; the blur tails cut off inside and outside a
-/// straight edge cancel, so the area stays unbiased to first order.
-const MIN_BAND_FRACTION: f64 = 0.5;
+/// Smallest fraction of the inner level ring left visible by the apex mirror (a quarter of
+/// a 12 px ring around a 45 px contact is still ~600 pixels for the level plane).
+const MIN_INNER_RING_VISIBLE: f64 = 0.25;
 /// A measured disc must agree with the block-level detection (about +-2 px): its radius
 /// within this fraction of the detected radius plus `DETECTION_SLACK_PX`, its centre
 /// within the same distance. A diverged edge model (a wrong level plane feeding a wild
@@ -204,6 +202,16 @@ fn median(v: &mut [f64]) -> f64 {
     }
     let mid = v.len() / 2;
     let (_, m, _) = v.select_nth_unstable_by(mid, f64::total_cmp);
+    *m
+}
+
+/// The `q` quantile (0..1) of `v` (reorders `v`); 0 when empty.
+fn quantile(v: &mut [f64], q: f64) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    let k = ((v.len() - 1) as f64 * q.clamp(0.0, 1.0)).round() as usize;
+    let (_, m, _) = v.select_nth_unstable_by(k, f64::total_cmp);
     *m
 }
 
@@ -315,7 +323,12 @@ struct BandPass {
     /// Sector edge points (only sectors whose band is entirely inside the image).
     points: Vec<[f64; 2]>,
     point_sigma: f64,
+    /// Fraction of sectors whose band is inside the image.
     visible_fraction: f64,
+    /// Fraction of sectors whose edge is seen (inside the image, not behind the mirror).
+    seen_fraction: f64,
+    /// Some sectors' edges are behind the mirror: their area follows the edge model.
+    hidden: bool,
 }
 
 impl ContactRadiusEstimator {
@@ -332,7 +345,10 @@ impl ContactRadiusEstimator {
             .filter(|(_, m)| **m < config.saturation_level)
             .map(|(s, _)| f64::from(*s) / (BLOCK * BLOCK) as f64)
             .collect();
-        let mirror_level = config.mirror_ratio * median(&mut means).max(1.0);
+        // The mirror is judged against the brightest background (the 95th percentile of the
+        // block means), not the median: under strong vignetting the median is far below the
+        // centre's level, and the bright centre of the shell would be taken for the mirror.
+        let mirror_level = config.mirror_ratio * quantile(&mut means, 0.95).max(1.0);
         let mirror_disc = mirror_disc(
             &reference,
             mirror_level.min(f64::from(config.saturation_level)),
@@ -423,8 +439,11 @@ impl ContactRadiusEstimator {
         // The band sum is exact while the true edge lies well inside the band (its blur
         // tail beyond 7 px of a 2.5 px blur holds < 1e-3 px of radius), so another pass
         // around the fitted shape is needed only when the shape moved by more than 2 px.
+        // Where the mirror hides part of the edge, that part's area is the model's, so the
+        // passes go on until the model is stable to 0.05 px (each pass shrinks the model's
+        // error by the hidden fraction of the rim, at most a half).
         let mut passes = 0;
-        for _pass in 0..3 {
+        for _pass in 0..6 {
             passes += 1;
             let Some(band) = self.band_pass(frame, &model) else {
                 break;
@@ -441,9 +460,10 @@ impl ContactRadiusEstimator {
                 .unwrap_or(model);
             let next = shape.scaled_to_radius(band.radius);
             let moved = max_edge_distance(&next, &model);
+            let (tolerance, max_passes) = if band.hidden { (0.05, 6) } else { (2.0, 3) };
             model = next;
             last = Some((band, next));
-            if moved < 2.0 {
+            if moved < tolerance || passes >= max_passes {
                 break;
             }
         }
@@ -460,7 +480,7 @@ impl ContactRadiusEstimator {
         let chi = fit_rms / band.point_sigma.max(1e-9);
         let quality =
             1.0 / (1.0 + (band.radius_sigma / 0.1).powi(2)) / (1.0 + (chi - 2.0).max(0.0).powi(2))
-                * band.visible_fraction;
+                * band.seen_fraction;
         let e = ellipse.eccentricity();
         Ok(ContactRadius {
             contact: true,
@@ -490,32 +510,72 @@ impl ContactRadiusEstimator {
         let (bw, bh) = (rb.bw, rb.bh);
         let area = (BLOCK * BLOCK) as f64;
         let sat = cfg.saturation_level;
+        // Per block: the normalised difference n and the grey-level difference d (block
+        // means); NaN where saturated or the mirror.
         let mut n = vec![f64::NAN; bw * bh];
-        let mut valid_vals = Vec::with_capacity(bw * bh);
-        for (i, ni) in n.iter_mut().enumerate() {
+        let mut d = vec![f64::NAN; bw * bh];
+        let mut ref_mean = vec![0.0; bw * bh];
+        let mut n_valid = 0usize;
+        for i in 0..bw * bh {
             let (fs, rs) = (f64::from(fb.sum[i]), f64::from(rb.sum[i]));
             if fb.max[i] < sat && rb.max[i] < sat && rs / area < self.mirror_level {
-                let v = (fs - rs) / rs.max(4.0 * area);
-                *ni = v;
-                valid_vals.push(v);
+                let r_mean = (rs / area).max(4.0);
+                d[i] = (fs - rs) / area;
+                n[i] = d[i] / r_mean;
+                ref_mean[i] = r_mean;
+                n_valid += 1;
             }
         }
-        if valid_vals.len() < 16 {
+        if n_valid < 16 || bw < 8 || bh < 8 {
             return None;
         }
-        // Median and MAD from every third valid block (thousands of samples: plenty for a
-        // robust location and scale, a third of the selection cost).
-        let mut sample: Vec<f64> = valid_vals.iter().step_by(3).copied().collect();
-        let med = median(&mut sample);
-        let sigma = robust_sigma(&mut sample, med).max(1e-6);
+        // Background level: the median of n over the frame's outer blocks (two deep). A
+        // contact whose edge is measurable leaves them free, and one cut by the image
+        // border covers well under half of them, so this holds at any contact size (the
+        // median over the whole frame does not once the contact covers a large part of it).
+        let mut border: Vec<f64> = Vec::with_capacity(4 * (bw + bh));
+        for y in 0..bh {
+            for x in 0..bw {
+                let edge = x < 2 || y < 2 || x + 2 >= bw || y + 2 >= bh;
+                let v = n[y * bw + x];
+                if edge && v.is_finite() {
+                    border.push(v);
+                }
+            }
+        }
+        if border.len() < 16 {
+            return None;
+        }
+        let med = median(&mut border);
+        // Noise of a block's grey-level difference, from differences between horizontal
+        // neighbours (a contact's edge is a small fraction of them, its slow illumination
+        // changes cancel): robust at any contact size. The sensor's noise is additive in
+        // grey levels, so a block's z-score is its grey-level excess over the background
+        // level; the normalised n would weigh the vignetted corners' noise up.
+        let mut diffs: Vec<f64> = Vec::with_capacity(n_valid);
+        for y in (0..bh).step_by(2) {
+            for x in 0..bw - 1 {
+                let (a, b) = (d[y * bw + x], d[y * bw + x + 1]);
+                if a.is_finite() && b.is_finite() {
+                    diffs.push(a - b);
+                }
+            }
+        }
+        if diffs.len() < 16 {
+            return None;
+        }
+        let sigma = (robust_sigma(&mut diffs, 0.0) / std::f64::consts::SQRT_2).max(1e-6);
         let thr = cfg.detect_sigma * sigma;
         let (mut pos, mut neg) = (Vec::new(), Vec::new());
-        for v in n.iter().filter(|v| v.is_finite()) {
-            let d = v - med;
-            if d > thr {
-                pos.push(d);
-            } else if d < -thr {
-                neg.push(-d);
+        for (v, r) in n.iter().zip(&ref_mean) {
+            if !v.is_finite() {
+                continue;
+            }
+            let dz = (v - med) * r;
+            if dz > thr {
+                pos.push(v - med);
+            } else if dz < -thr {
+                neg.push(med - v);
             }
         }
         let (sign, mut cands) = if pos.len() >= neg.len() {
@@ -527,10 +587,18 @@ impl ContactRadiusEstimator {
         if (cands.len() as f64) < min_blocks {
             return None;
         }
+        // Re-threshold at half the candidates' median contact level (n is flat over the
+        // contact whatever the illumination), and at least 2.5 block noise SDs so the noisy
+        // dark corners do not join the contact.
         let level = median(&mut cands);
         let mask: Vec<bool> = n
             .iter()
-            .map(|v| v.is_finite() && sign * (v - med) > 0.5 * level)
+            .zip(&ref_mean)
+            .map(|(v, r)| {
+                v.is_finite()
+                    && sign * (v - med) > 0.5 * level
+                    && sign * (v - med) * r > 2.5 * sigma
+            })
             .collect();
         let component = largest_component(&mask, bw, bh);
         if (component.len() as f64) < min_blocks {
@@ -569,14 +637,6 @@ impl ContactRadiusEstimator {
         })
     }
 
-    /// Width of the visible annulus between the apex mirror's masked disc and the model's
-    /// edge (along the shortest ray), px; `None` without a mirror.
-    fn mirror_gap_px(&self, model: &Ellipse) -> Option<f64> {
-        let (mc, r2) = self.mirror_disc?;
-        let d = (mc[0] - model.center_px[0]).hypot(mc[1] - model.center_px[1]);
-        Some(model.semi_minor_px - d - r2.sqrt())
-    }
-
     /// Step 3 and 4 for one edge model.
     fn band_pass(&self, frame: &GrayImage, model: &Ellipse) -> Option<BandPass> {
         let cfg = &self.config;
@@ -584,21 +644,14 @@ impl ContactRadiusEstimator {
         let r_eq = model.equivalent_radius_px();
         // Shrink band and rings for small discs so the inner ring stays inside.
         let shrink = (r_eq / (cfg.band_half_width_px + cfg.level_ring_px + 3.0)).min(1.0);
-        let mut w = cfg.band_half_width_px * shrink;
-        let mut ring = cfg.level_ring_px * shrink;
-        // A contact just outside the apex mirror: the inner ring would lie in the mirror's
-        // mask, and a level fitted to the few pixels at the mask's rim is wrong (a 49 px
-        // contact once read 820 px). Narrow the inner ring to the visible annulus, then the
-        // band; an annulus too thin for both is not measurable.
-        if let Some(gap) = self.mirror_gap_px(model)
-            && gap < w + ring
-        {
-            ring = (gap - w).max(MIN_LEVEL_RING_PX);
-            w = gap - ring;
-            if w < MIN_BAND_FRACTION * cfg.band_half_width_px {
-                return None;
-            }
-        }
+        let w = cfg.band_half_width_px * shrink;
+        let ring = cfg.level_ring_px * shrink;
+        // The apex mirror (masked) may lie anywhere inside the contact, up to its edge:
+        // masked pixels leave the level rings; in the band they count as the model's sharp
+        // edge (f = 1 inside, 0 outside), and a sector with masked pixels in the edge's
+        // own zone (s > -w/2, where the blurred edge is still far from 1) is "hidden": its
+        // edge point is left out of the shape fit and its area follows the fitted shape
+        // (see `measure`, which iterates until that shape is stable).
         let (cx, cy) = (model.center_px[0], model.center_px[1]);
         let r_lo = (model.semi_minor_px - w - ring).max(0.0);
         let r_hi = model.semi_major_px + w + ring;
@@ -648,6 +701,8 @@ impl ContactRadiusEstimator {
         inner_ring.reserve((perimeter * (ring + 1.0)) as usize);
         outer_ring.reserve((perimeter * (ring + 1.0)) as usize);
         let mut sector_clipped = vec![false; sectors];
+        let mut sector_hidden = vec![false; sectors];
+        let mut inner_total = 0usize;
         let scale = 1.0 / r_hi.max(1.0);
         let y0 = (cy - r_hi).floor() as i64;
         let y1 = (cy + r_hi).ceil() as i64;
@@ -706,7 +761,9 @@ impl ContactRadiusEstimator {
                 }
                 let inside_img = row_inside && xi >= 0 && (xi as usize) < w_img;
                 if !inside_img {
-                    if s >= -w {
+                    // Only the band matters: an outer ring cut by the image border still
+                    // has its visible pixels for the level.
+                    if s >= -w && s <= w {
                         sector_clipped[sector_of(dx, dy)] = true;
                     }
                     continue;
@@ -722,10 +779,14 @@ impl ContactRadiusEstimator {
                 let nv = if masked { f64::NAN } else { (iv - rv) * inv_r };
                 if s < -w {
                     n_inner += 1.0;
+                    inner_total += 1;
                     if !masked {
                         inner_ring.push([dx * scale, dy * scale, nv]);
                     }
                 } else if s <= w {
+                    if masked && s > -0.5 * w {
+                        sector_hidden[sector_of(dx, dy)] = true;
+                    }
                     band.push((
                         [dx as f32, dy as f32, nv as f32, s as f32],
                         sector_of(dx, dy) as u16,
@@ -734,6 +795,11 @@ impl ContactRadiusEstimator {
                     outer_ring.push([dx * scale, dy * scale, nv]);
                 }
             }
+        }
+        // The inner level needs a fair part of its ring visible: a level fitted to a few
+        // pixels at the mirror's rim can be far off (a 49 px contact once read 820 px).
+        if (inner_ring.len() as f64) < (MIN_INNER_RING_VISIBLE * inner_total as f64).max(30.0) {
+            return None;
         }
         let (p_in, sig_in) = fit_plane(&inner_ring)?;
         let (p_out, sig_out) = fit_plane(&outer_ring)?;
@@ -779,6 +845,13 @@ impl ContactRadiusEstimator {
         let dtheta = std::f64::consts::TAU / sectors as f64;
         let visible: Vec<usize> = (0..sectors).filter(|&s| !sector_clipped[s]).collect();
         let visible_fraction = visible.len() as f64 / sectors as f64;
+        let seen = (0..sectors)
+            .filter(|&s| !sector_clipped[s] && !sector_hidden[s])
+            .count();
+        // The shape comes from the seen edge points: at least half the rim must be seen.
+        if 2 * seen < sectors {
+            return None;
+        }
         // Per-sector polar area: analytic inner part + band sum.
         let mut points = Vec::with_capacity(sectors);
         let mut sector_areas = vec![0.0; sectors];
@@ -788,7 +861,7 @@ impl ContactRadiusEstimator {
             let r_inner = (model.polar_radius_px(ct, st) - w).max(0.0);
             let a_s = 0.5 * dtheta * r_inner * r_inner + sector_sum[s];
             sector_areas[s] = a_s;
-            if !sector_clipped[s] {
+            if !sector_clipped[s] && !sector_hidden[s] {
                 let r_s = (2.0 * a_s.max(0.0) / dtheta).sqrt();
                 points.push([cx + r_s * ct, cy + r_s * st]);
             }
@@ -826,6 +899,8 @@ impl ContactRadiusEstimator {
             points,
             point_sigma,
             visible_fraction,
+            seen_fraction: seen as f64 / sectors as f64,
+            hidden: sector_hidden.iter().any(|&h| h),
         })
     }
 }
