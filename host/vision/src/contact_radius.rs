@@ -122,6 +122,8 @@ pub enum VisionError {
 
 const BLOCK: usize = 4;
 
+/// Radius up to which the level rings have their configured width (see `band_pass`).
+const RING_FULL_WIDTH_RADIUS_PX: f64 = 120.0;
 /// Smallest fraction of the inner level ring left visible by the apex mirror (a quarter of
 /// a 12 px ring around a 45 px contact is still ~600 pixels for the level plane).
 const MIN_INNER_RING_VISIBLE: f64 = 0.25;
@@ -645,8 +647,15 @@ impl ContactRadiusEstimator {
         // Shrink band and rings for small discs so the inner ring stays inside.
         let shrink = (r_eq / (cfg.band_half_width_px + cfg.level_ring_px + 3.0)).min(1.0);
         let w = cfg.band_half_width_px * shrink;
-        let ring = cfg.level_ring_px * shrink;
-        // The apex mirror (masked) may lie anywhere inside the contact, up to its edge:
+        // Beyond `RING_FULL_WIDTH_RADIUS_PX` the rings narrow as 1/r, holding their pixel
+        // count (and cost) constant. A level error e moves every band pixel's fraction: the
+        // area by about (sum f) e / D against the band's own pixel noise sqrt(N_band) sigma
+        // / D; with e ~ sigma / sqrt(ring pixels) their ratio is sqrt(w / (2 ring)) per
+        // level, about 0.6 at the configured widths and 0.8 at 220 px, so the radius error
+        // still falls with the radius.
+        let ring = cfg.level_ring_px * shrink * (RING_FULL_WIDTH_RADIUS_PX / r_eq).min(1.0);
+        // The apex mirror (masked) may lie anywhere inside the contact, up to its edge
+        // (not beyond it, see `mirror_outside`):
         // masked pixels leave the level rings; in the band they count as the model's sharp
         // edge (f = 1 inside, 0 outside), and a sector with masked pixels in the edge's
         // own zone (s > -w/2, where the blurred edge is still far from 1) is "hidden": its
@@ -703,6 +712,7 @@ impl ContactRadiusEstimator {
         let mut sector_clipped = vec![false; sectors];
         let mut sector_hidden = vec![false; sectors];
         let mut inner_total = 0usize;
+        let mut mirror_outside = false;
         let scale = 1.0 / r_hi.max(1.0);
         let y0 = (cy - r_hi).floor() as i64;
         let y1 = (cy + r_hi).ceil() as i64;
@@ -787,6 +797,9 @@ impl ContactRadiusEstimator {
                     if masked && s > -0.5 * w {
                         sector_hidden[sector_of(dx, dy)] = true;
                     }
+                    if inv_r.is_nan() && s > 0.5 * w {
+                        mirror_outside = true;
+                    }
                     band.push((
                         [dx as f32, dy as f32, nv as f32, s as f32],
                         sector_of(dx, dy) as u16,
@@ -795,6 +808,13 @@ impl ContactRadiusEstimator {
                     outer_ring.push([dx * scale, dy * scale, nv]);
                 }
             }
+        }
+        // The mirror reaching out of the contact (masked reference pixels more than half a
+        // band outside the edge model) hides the edge over a stretch the shape cannot be
+        // trusted on, and the detection then sees a crescent, not the disc: such a contact,
+        // still largely behind the mirror, is not measured.
+        if mirror_outside {
+            return None;
         }
         // The inner level needs a fair part of its ring visible: a level fitted to a few
         // pixels at the mirror's rim can be far off (a 49 px contact once read 820 px).
