@@ -4,11 +4,13 @@
 //! 1. Normalised difference `n = (I - R) / R` per pixel: the LED's vignetting and
 //!    illumination gradient multiply both frames, so `n` is flat where contact changes the
 //!    reflectance by a constant factor. Saturated pixels and the apex mirror (much brighter
-//!    than the reference's median) are masked.
-//! 2. Detection on 4x4 blocks: robust median/MAD of `n`, candidates beyond 5 sigma, polarity
-//!    by majority, re-threshold at half the candidates' median level, largest 4-connected
-//!    component with holes (the mirror) filled. Nothing found = "no contact".
-//!    This gives a coarse centre and radius (about +-2 px).
+//!    than the reference's brightest background) are masked.
+//! 2. Detection on 4x4 blocks: background level = median of `n` over the frame's outer
+//!    blocks, block noise from neighbour differences (both unaffected by a contact covering
+//!    much of the frame), each block's excess in grey levels (additive sensor noise);
+//!    candidates beyond 5 sigma, polarity by majority, re-threshold at half the candidates'
+//!    median level, largest 4-connected component with holes (the mirror) filled. Nothing
+//!    found = "no contact". This gives a coarse centre and radius (about +-2 px).
 //! 3. Area moment in a band: with the contact level `in(x, y)` and the background level
 //!    `out(x, y)` fitted as planes (robust least squares) in rings just inside and outside a
 //!    band of +-w px around the current edge model, each band pixel contributes the fraction
@@ -19,6 +21,11 @@
 //!    (`A_s = r_s^2 dtheta / 2`); an algebraic ellipse fit of those edge points gives the
 //!    centre, axes and angle. The band follows the fitted ellipse in a second pass.
 //!    Eccentricity = sin(tilt) for a circular contact seen obliquely.
+//! 5. The apex mirror may lie anywhere inside the contact: its pixels leave the level rings
+//!    and count as the model's sharp edge in the band; sectors whose edge runs behind it are
+//!    left out of the ellipse fit and take their area from the fitted shape (passes repeat
+//!    until it is stable). A mirror reaching out of the contact, an edge hidden on more than
+//!    half the rim or an inner level ring mostly covered: "no measurable contact".
 
 use super::ellipse_fit::{Ellipse, fit_ellipse};
 use super::linear_solve::solve;
