@@ -320,6 +320,9 @@ struct Coarse {
     /// The detected blocks reach the image's edge: the disc may be clipped, and then its
     /// visible part's centre and radius are not the disc's.
     at_image_edge: bool,
+    /// Elliptical edge model from the blocks' second moments, when it is clearly not a
+    /// circle.
+    shape: Option<Ellipse>,
 }
 
 /// Sums from one band pass.
@@ -443,7 +446,9 @@ impl ContactRadiusEstimator {
         let Some(coarse) = self.detect(frame) else {
             return Ok(none);
         };
-        let mut model = Ellipse::circle(coarse.center, coarse.radius);
+        let mut model = coarse
+            .shape
+            .unwrap_or_else(|| Ellipse::circle(coarse.center, coarse.radius));
         let mut last: Option<(BandPass, Ellipse)> = None;
         // The band sum is exact while the true edge lies well inside the band (its blur
         // tail beyond 7 px of a 2.5 px blur holds < 1e-3 px of radius), so another pass
@@ -621,28 +626,61 @@ impl ContactRadiusEstimator {
             span.0 = span.0.min(x);
             span.1 = span.1.max(x);
         }
+        // Area, centroid and second moments of the filled blocks (block units).
         let (mut cnt, mut sx, mut sy) = (0.0, 0.0, 0.0);
+        let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+        let sum_sq = |n: f64| n * (n + 1.0) * (2.0 * n + 1.0) / 6.0;
         for (y, &(lo, hi)) in row_span.iter().enumerate() {
             if lo <= hi {
-                let k = f64::from(hi - lo + 1);
+                let (l, h, yf) = (f64::from(lo), f64::from(hi), y as f64);
+                let k = h - l + 1.0;
+                let row_sx = k * 0.5 * (l + h);
                 cnt += k;
-                sx += k * 0.5 * (f64::from(lo) + f64::from(hi));
-                sy += k * y as f64;
+                sx += row_sx;
+                sy += k * yf;
+                sxx += sum_sq(h) - sum_sq(l - 1.0);
+                sxy += yf * row_sx;
+                syy += k * yf * yf;
             }
         }
         let b = BLOCK as f64;
-        let center = [
-            sx / cnt * b + (b - 1.0) / 2.0,
-            sy / cnt * b + (b - 1.0) / 2.0,
-        ];
+        let (mx, my) = (sx / cnt, sy / cnt);
+        let center = [mx * b + (b - 1.0) / 2.0, my * b + (b - 1.0) / 2.0];
         let radius = (cnt * area / std::f64::consts::PI).sqrt();
         let at_image_edge = component.iter().any(|&(x, y)| {
             x == 0 || y == 0 || usize::from(x) + 1 >= bw || usize::from(y) + 1 >= bh
         });
+        // Shape: a uniform ellipse's variance along an axis is (semi-axis)^2 / 4; each
+        // block adds its own 1/12 block^2. An elliptical contact (a tilt) then starts with
+        // an elliptical edge model, and its band pass needs no second pass to follow it.
+        let (cxx, cyy) = (
+            sxx / cnt - mx * mx - 1.0 / 12.0,
+            syy / cnt - my * my - 1.0 / 12.0,
+        );
+        let cxy = sxy / cnt - mx * my;
+        let (half_tr, det) = (0.5 * (cxx + cyy), cxx * cyy - cxy * cxy);
+        let disc = (half_tr * half_tr - det).max(0.0).sqrt();
+        let (l1, l2) = (half_tr + disc, half_tr - disc);
+        let shape = if at_image_edge || l2 <= 0.0 {
+            None
+        } else {
+            let (a, bb) = (2.0 * l1.sqrt() * b, 2.0 * l2.sqrt() * b);
+            // Below 2 px between the axes the circle is within the 2 px a pass tolerates.
+            (a - bb > 2.0).then(|| {
+                Ellipse {
+                    center_px: center,
+                    semi_major_px: a,
+                    semi_minor_px: bb,
+                    angle_rad: 0.5 * (2.0 * cxy).atan2(cxx - cyy),
+                }
+                .scaled_to_radius(radius)
+            })
+        };
         Some(Coarse {
             center,
             radius,
             at_image_edge,
+            shape,
         })
     }
 
