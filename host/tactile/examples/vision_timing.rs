@@ -79,4 +79,31 @@ fn main() {
             });
         }
     }
+    // A tilted contact (20 degrees: b/a = 0.94) is an ellipse: its band follows the
+    // ellipse, not a circle.
+    for radius in [100.0, 220.0] {
+        let mut scene = SyntheticScene::typical();
+        scene.disc = Some(SyntheticDisc {
+            center_px: [321.3, 238.6],
+            radius_px: radius / 0.94f64.sqrt(),
+            semi_minor_px: radius * 0.94f64.sqrt(),
+            angle_rad: 0.4,
+        });
+        let (reference, frame) = scene.render_pair(1);
+        let Ok(est) = ContactRadiusEstimator::new(reference, ContactRadiusConfig::default()) else {
+            return;
+        };
+        let passes = est
+            .measure(&frame)
+            .ok()
+            .and_then(|m| m.disc)
+            .map_or(0, |d| d.passes);
+        time(
+            &format!("contact radius, r = {radius} px tilted 20 deg ({passes} passes)"),
+            n,
+            || {
+                black_box(est.measure(black_box(&frame)).ok());
+            },
+        );
+    }
 }

@@ -723,19 +723,53 @@ impl ContactRadiusEstimator {
         let is_circle = (model.semi_major_px - model.semi_minor_px).abs() < 1e-9;
         // Signed distance to the model edge (negative inside); exact for a circle, along
         // the ray from the centre for an ellipse.
+        // Along a ray, s = R(theta) (rho - 1) with rho the ellipse's normalised radius and
+        // b <= R <= a, so the ranges of rho^2 below decide a pixel's class without the two
+        // square roots of the exact s, which only the band and the classes' rims need.
         let signed = |dx: f64, dy: f64| -> f64 {
             let q = (dx * dx + dy * dy).sqrt();
-            if is_circle {
-                q - model.semi_major_px
+            let u = (dx * cos_a + dy * sin_a) * ia;
+            let v = (-dx * sin_a + dy * cos_a) * ib;
+            let rho = (u * u + v * v).sqrt();
+            if rho > 0.0 {
+                q - q / rho
             } else {
-                let u = (dx * cos_a + dy * sin_a) * ia;
-                let v = (-dx * sin_a + dy * cos_a) * ib;
-                let rho = (u * u + v * v).sqrt();
-                if rho > 0.0 {
-                    q - q / rho
-                } else {
-                    -model.semi_minor_px
-                }
+                -model.semi_minor_px
+            }
+        };
+        let thr2 = |t: f64| if t <= 0.0 { -1.0 } else { t * t };
+        let k_all = w + ring;
+        let deep_inner2 = thr2(1.0 - k_all * ib);
+        let (in_ring_lo2, in_ring_hi2) = (thr2(1.0 - k_all * ia), thr2(1.0 - w * ib));
+        let (out_ring_lo2, out_ring_hi2) = (thr2(1.0 + w * ib), thr2(1.0 + k_all * ia));
+        let beyond2 = thr2(1.0 + k_all * ib);
+        // The x range (relative to the centre) of row dy inside the model scaled by t.
+        let (t_out, t_in) = (1.0 + k_all * ib, 1.0 - k_all * ib);
+        let ellipse_row = |t: f64, dy: f64| -> Option<(f64, f64)> {
+            let (ia2, ib2) = ((ia / t).powi(2), (ib / t).powi(2));
+            let alpha = cos_a * cos_a * ia2 + sin_a * sin_a * ib2;
+            let beta = dy * cos_a * sin_a * (ia2 - ib2);
+            let gamma = dy * dy * (sin_a * sin_a * ia2 + cos_a * cos_a * ib2) - 1.0;
+            let disc = beta * beta - alpha * gamma;
+            (disc >= 0.0 && alpha > 0.0).then(|| {
+                let root = disc.sqrt();
+                ((-beta - root) / alpha, (-beta + root) / alpha)
+            })
+        };
+        let classify = |dx: f64, dy: f64| -> f64 {
+            let u = (dx * cos_a + dy * sin_a) * ia;
+            let v = (-dx * sin_a + dy * cos_a) * ib;
+            let rho2 = u * u + v * v;
+            if rho2 > beyond2 {
+                k_all + 1.0
+            } else if rho2 < deep_inner2 {
+                -k_all - 1.0
+            } else if rho2 >= in_ring_lo2 && rho2 < in_ring_hi2 {
+                -w - 0.5 * ring
+            } else if rho2 > out_ring_lo2 && rho2 <= out_ring_hi2 {
+                w + 0.5 * ring
+            } else {
+                signed(dx, dy)
             }
         };
         let sq = |v: f64| v.max(0.0) * v.max(0.0);
@@ -763,17 +797,32 @@ impl ContactRadiusEstimator {
         let y1 = (cy + r_hi).ceil() as i64;
         for yi in y0..=y1 {
             let dy = yi as f64 - cy;
-            let span2 = r_hi * r_hi - dy * dy;
-            if span2 < 0.0 {
-                continue;
-            }
-            let span = span2.sqrt();
-            let (xa, xb) = ((cx - span).ceil() as i64, (cx + span).floor() as i64);
-            let hole = if dy.abs() < r_lo {
-                let s = (r_lo * r_lo - dy * dy).sqrt();
-                Some(((cx - s).ceil() as i64, (cx + s).floor() as i64))
+            let (xa, xb, hole) = if is_circle {
+                let span2 = r_hi * r_hi - dy * dy;
+                if span2 < 0.0 {
+                    continue;
+                }
+                let span = span2.sqrt();
+                let hole = if dy.abs() < r_lo {
+                    let s = (r_lo * r_lo - dy * dy).sqrt();
+                    Some(((cx - s).ceil() as i64, (cx + s).floor() as i64))
+                } else {
+                    None
+                };
+                ((cx - span).ceil() as i64, (cx + span).floor() as i64, hole)
             } else {
-                None
+                // The row's part of the outer ellipse (beyond it s > w + ring) around the
+                // inner one (inside it s < -w - ring).
+                let Some((lo, hi)) = ellipse_row(t_out, dy) else {
+                    continue;
+                };
+                let hole = if t_in > 0.0 {
+                    ellipse_row(t_in, dy)
+                        .map(|(l, h)| ((cx + l).ceil() as i64, (cx + h).floor() as i64))
+                } else {
+                    None
+                };
+                ((cx + lo).ceil() as i64, (cx + hi).floor() as i64, hole)
             };
             let row_inside = yi >= 0 && (yi as usize) < h_img;
             // Pixels inside the hole are all inner (f = 1): count them, no need to visit.
@@ -809,7 +858,7 @@ impl ContactRadiusEstimator {
                         d2.sqrt() - model.semi_major_px
                     }
                 } else {
-                    signed(dx, dy)
+                    classify(dx, dy)
                 };
                 if s > w + ring {
                     continue;
