@@ -726,13 +726,10 @@ impl ContactRadiusEstimator {
         // Along a ray, s = R(theta) (rho - 1) with rho the ellipse's normalised radius and
         // b <= R <= a, so the ranges of rho^2 below decide a pixel's class without the two
         // square roots of the exact s, which only the band and the classes' rims need.
-        let signed = |dx: f64, dy: f64| -> f64 {
-            let q = (dx * dx + dy * dy).sqrt();
-            let u = (dx * cos_a + dy * sin_a) * ia;
-            let v = (-dx * sin_a + dy * cos_a) * ib;
-            let rho = (u * u + v * v).sqrt();
-            if rho > 0.0 {
-                q - q / rho
+        let signed = |dx: f64, dy: f64, rho2: f64| -> f64 {
+            if rho2 > 0.0 {
+                let q = (dx * dx + dy * dy).sqrt();
+                q - q / rho2.sqrt()
             } else {
                 -model.semi_minor_px
             }
@@ -769,7 +766,7 @@ impl ContactRadiusEstimator {
             } else if rho2 > out_ring_lo2 && rho2 <= out_ring_hi2 {
                 w + 0.5 * ring
             } else {
-                signed(dx, dy)
+                signed(dx, dy, rho2)
             }
         };
         let sq = |v: f64| v.max(0.0) * v.max(0.0);
