@@ -99,9 +99,9 @@ pub struct ContactDisc {
 }
 
 /// Result for one frame. `contact` is false when no contact disc is found or its edge
-/// cannot be measured (the edge behind the apex mirror on more than half the rim, the
-/// inner level ring mostly covered by the mirror, or a measurement that disagrees with the
-/// detection); `quality` is 0 then, else in (0, 1]:
+/// cannot be measured (the apex mirror reaching out of the contact, the edge behind the
+/// mirror on more than half the rim, the inner level ring mostly covered by the mirror, or
+/// a measurement that disagrees with the detection); `quality` is 0 then, else in (0, 1]:
 /// `1 / (1 + (radius_sigma_px / 0.1)^2)` (0.5 when the predicted error equals the 0.1 px
 /// target) times `1 / (1 + max(0, chi - 2)^2)` where chi is the sector radii's RMS about
 /// the ellipse over their predicted noise (an irregular, non-elliptical edge lowers it),
@@ -699,13 +699,13 @@ impl ContactRadiusEstimator {
         // level, about 0.6 at the configured widths and 0.8 at 220 px, so the radius error
         // still falls with the radius.
         let ring = cfg.level_ring_px * shrink * (RING_FULL_WIDTH_RADIUS_PX / r_eq).min(1.0);
-        // The apex mirror (masked) may lie anywhere inside the contact, up to its edge
-        // (not beyond it, see `mirror_outside`):
-        // masked pixels leave the level rings; in the band they count as the model's sharp
-        // edge (f = 1 inside, 0 outside), and a sector with masked pixels in the edge's
-        // own zone (s > -w/2, where the blurred edge is still far from 1) is "hidden": its
-        // edge point is left out of the shape fit and its area follows the fitted shape
-        // (see `measure`, which iterates until that shape is stable).
+        // The apex mirror (masked) may lie anywhere inside the contact, up to its edge (not
+        // beyond it, see `mirror_outside`): masked pixels leave the level rings; in the band
+        // they count as the model's sharp edge (f = 1 inside, 0 outside), and a sector with
+        // masked pixels in the edge's own zone (s > -w/2, where the blurred edge is still
+        // far from 1) is "hidden": its edge point is left out of the shape fit and its area
+        // follows the fitted shape (see `measure`, which iterates until that shape is
+        // stable).
         let (cx, cy) = (model.center_px[0], model.center_px[1]);
         let r_lo = (model.semi_minor_px - w - ring).max(0.0);
         let r_hi = model.semi_major_px + w + ring;
@@ -819,7 +819,13 @@ impl ContactRadiusEstimator {
                 } else {
                     None
                 };
-                ((cx + lo).ceil() as i64, (cx + hi).floor() as i64, hole)
+                // Within the circle of radius r_hi (beyond it s > w + ring anyway), which
+                // also bounds the row for a very flat model.
+                (
+                    (cx + lo.max(-r_hi)).ceil() as i64,
+                    (cx + hi.min(r_hi)).floor() as i64,
+                    hole,
+                )
             };
             let row_inside = yi >= 0 && (yi as usize) < h_img;
             // Pixels inside the hole are all inner (f = 1): count them, no need to visit.
