@@ -721,9 +721,8 @@ impl ContactRadiusEstimator {
         let (sin_a, cos_a) = model.angle_rad.sin_cos();
         let (ia, ib) = (1.0 / model.semi_major_px, 1.0 / model.semi_minor_px);
         let is_circle = (model.semi_major_px - model.semi_minor_px).abs() < 1e-9;
-        // Signed distance to the model edge (negative inside); exact for a circle, along
-        // the ray from the centre for an ellipse.
-        // Along a ray, s = R(theta) (rho - 1) with rho the ellipse's normalised radius and
+        // Signed distance s to the model edge (negative inside), along the ray from the
+        // centre for an ellipse. Along a ray, s = R(theta) (rho - 1) with rho the ellipse's normalised radius and
         // b <= R <= a, so the ranges of rho^2 below decide a pixel's class without the two
         // square roots of the exact s, which only the band and the classes' rims need.
         let signed = |dx: f64, dy: f64, rho2: f64| -> f64 {
@@ -740,6 +739,8 @@ impl ContactRadiusEstimator {
         let (in_ring_lo2, in_ring_hi2) = (thr2(1.0 - k_all * ia), thr2(1.0 - w * ib));
         let (out_ring_lo2, out_ring_hi2) = (thr2(1.0 + w * ib), thr2(1.0 + k_all * ia));
         let beyond2 = thr2(1.0 + k_all * ib);
+        // Certainly in the band (|s| <= w): s = R (rho - 1) with R <= a.
+        let (band_lo2, band_hi2) = (thr2(1.0 - w * ia), thr2(1.0 + w * ia));
         // The x range (relative to the centre) of row dy inside the model scaled by t.
         let (t_out, t_in) = (1.0 + k_all * ib, 1.0 - k_all * ib);
         let ellipse_row = |t: f64, dy: f64| -> Option<(f64, f64)> {
@@ -765,8 +766,21 @@ impl ContactRadiusEstimator {
                 -w - 0.5 * ring
             } else if rho2 > out_ring_lo2 && rho2 <= out_ring_hi2 {
                 w + 0.5 * ring
+            } else if rho2 > band_lo2 && rho2 <= band_hi2 {
+                f64::NAN
             } else {
                 signed(dx, dy, rho2)
+            }
+        };
+        // The exact s of a band pixel, needed only where it is masked (its f is then the
+        // model's sharp edge, and its place decides "hidden" and "mirror outside").
+        let exact_s = |dx: f64, dy: f64| -> f64 {
+            if is_circle {
+                (dx * dx + dy * dy).sqrt() - model.semi_major_px
+            } else {
+                let u = (dx * cos_a + dy * sin_a) * ia;
+                let v = (-dx * sin_a + dy * cos_a) * ib;
+                signed(dx, dy, u * u + v * v)
             }
         };
         let sq = |v: f64| v.max(0.0) * v.max(0.0);
@@ -858,7 +872,8 @@ impl ContactRadiusEstimator {
                             w + 0.5 * ring
                         }
                     } else {
-                        d2.sqrt() - model.semi_major_px
+                        // In the band: NaN = "in the band, exact s not computed".
+                        f64::NAN
                     }
                 } else {
                     classify(dx, dy)
@@ -866,11 +881,12 @@ impl ContactRadiusEstimator {
                 if s > w + ring {
                     continue;
                 }
+                let in_band = s.is_nan();
                 let inside_img = row_inside && xi >= 0 && (xi as usize) < w_img;
                 if !inside_img {
                     // Only the band matters: an outer ring cut by the image border still
                     // has its visible pixels for the level.
-                    if s >= -w && s <= w {
+                    if in_band || (s >= -w && s <= w) {
                         sector_clipped[sector_of(dx, dy)] = true;
                     }
                     continue;
@@ -890,13 +906,19 @@ impl ContactRadiusEstimator {
                     if !masked {
                         inner_ring.push([dx * scale, dy * scale, nv]);
                     }
-                } else if s <= w {
+                } else if in_band || s <= w {
+                    let s = if in_band && masked {
+                        exact_s(dx, dy)
+                    } else {
+                        s
+                    };
                     if masked && s > -0.5 * w {
                         sector_hidden[sector_of(dx, dy)] = true;
                     }
                     if inv_r.is_nan() && s > 0.5 * w {
                         mirror_outside = true;
                     }
+                    // s is only read for masked pixels (NaN n), where it is exact.
                     band.push((
                         [dx as f32, dy as f32, nv as f32, s as f32],
                         sector_of(dx, dy) as u16,
