@@ -722,9 +722,10 @@ impl ContactRadiusEstimator {
         let (ia, ib) = (1.0 / model.semi_major_px, 1.0 / model.semi_minor_px);
         let is_circle = (model.semi_major_px - model.semi_minor_px).abs() < 1e-9;
         // Signed distance s to the model edge (negative inside), along the ray from the
-        // centre for an ellipse. Along a ray, s = R(theta) (rho - 1) with rho the ellipse's normalised radius and
-        // b <= R <= a, so the ranges of rho^2 below decide a pixel's class without the two
-        // square roots of the exact s, which only the band and the classes' rims need.
+        // centre for an ellipse: s = R(theta) (rho - 1) with rho the ellipse's normalised
+        // radius and b <= R <= a, so the ranges of rho^2 below decide a pixel's class
+        // without the two square roots of the exact s, which only the classes' rims and
+        // masked band pixels need.
         let signed = |dx: f64, dy: f64, rho2: f64| -> f64 {
             if rho2 > 0.0 {
                 let q = (dx * dx + dy * dy).sqrt();
