@@ -22,7 +22,7 @@ sections=(
     "demo@@@@for ep in 25:6 60:6 120:6 200:6 350:15 600:15 1000:15; do echo \"true E2 \${ep%:*} kPa at \${ep#*:} kPa:\"; cargo run -q --release -p tactile -- demo --modulus \${ep%:*} --pressure \${ep#*:} --seed 3 2>&1 | grep -E '^(E2 =|simulated sample|error)' | sed 's/^/    /'; done"
     "bench-measure@@@@cargo test -q -p tactile --release --test cli_calibrate -- --nocapture && cargo test -q --release -p system-tests --test measure_sim_bench -- --ignored --nocapture"
     "fit@@@@cargo test -q -p fit --release --test fit_lut -- --nocapture"
-    "vision@@@@cargo run -q --release -p tactile --example vision_timing && cargo test -q --release -p system-tests --test vision_near_mirror -- --ignored --nocapture"
+    "vision@@@@cargo run -q --release -p tactile --example vision_timing && cargo test -q --release -p vision --test unseen_frames -- --ignored --nocapture && cargo test -q --release -p system-tests --test vision_near_mirror -- --ignored --nocapture"
     "pressure@@@@cargo test -q -p controller --release --test pressure_regulation -- --nocapture --test-threads=1 && cargo run -q --release -p hil-sim --example pressure_steps"
     "emulated-bench@@@@cargo test -q -p hil-sim --release --test device_behaviour -- --nocapture --test-threads=1 && cargo test -q -p hil-sim --release --test clock_alignment -- --nocapture"
     "daemon@@@@cargo test -q --release -p system-tests --test daemon_experiments -- --nocapture --test-threads=1"

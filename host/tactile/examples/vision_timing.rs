@@ -34,9 +34,16 @@ fn main() {
         .nth(1)
         .and_then(|s| s.parse().ok())
         .unwrap_or(300);
-    for radius in [60.0, 100.0, 170.0] {
+    for radius in [20.0, 60.0, 100.0, 170.0, 220.0] {
         let mut scene = SyntheticScene::typical();
-        scene.disc = Some(SyntheticDisc::circle([321.3, 238.6], radius));
+        // A contact smaller than the apex mirror would be hidden behind it: the 20 px one
+        // is placed clear of the mirror; the others surround it.
+        let center = if radius < 40.0 {
+            [430.0, 300.0]
+        } else {
+            [321.3, 238.6]
+        };
+        scene.disc = Some(SyntheticDisc::circle(center, radius));
         let (reference, frame) = scene.render_pair(1);
         let Ok(est) = ContactRadiusEstimator::new(reference, ContactRadiusConfig::default()) else {
             return;
@@ -71,5 +78,32 @@ fn main() {
                 }
             });
         }
+    }
+    // A tilted contact (20 degrees: b/a = 0.94) is an ellipse: its band follows the
+    // ellipse, not a circle.
+    for radius in [100.0, 220.0] {
+        let mut scene = SyntheticScene::typical();
+        scene.disc = Some(SyntheticDisc {
+            center_px: [321.3, 238.6],
+            radius_px: radius / 0.94f64.sqrt(),
+            semi_minor_px: radius * 0.94f64.sqrt(),
+            angle_rad: 0.4,
+        });
+        let (reference, frame) = scene.render_pair(1);
+        let Ok(est) = ContactRadiusEstimator::new(reference, ContactRadiusConfig::default()) else {
+            return;
+        };
+        let passes = est
+            .measure(&frame)
+            .ok()
+            .and_then(|m| m.disc)
+            .map_or(0, |d| d.passes);
+        time(
+            &format!("contact radius, r = {radius} px tilted 20 deg ({passes} passes)"),
+            n,
+            || {
+                black_box(est.measure(black_box(&frame)).ok());
+            },
+        );
     }
 }

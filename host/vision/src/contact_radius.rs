@@ -4,11 +4,13 @@
 //! 1. Normalised difference `n = (I - R) / R` per pixel: the LED's vignetting and
 //!    illumination gradient multiply both frames, so `n` is flat where contact changes the
 //!    reflectance by a constant factor. Saturated pixels and the apex mirror (much brighter
-//!    than the reference's median) are masked.
-//! 2. Detection on 4x4 blocks: robust median/MAD of `n`, candidates beyond 5 sigma, polarity
-//!    by majority, re-threshold at half the candidates' median level, largest 4-connected
-//!    component with holes (the mirror) filled. Nothing found = "no contact".
-//!    This gives a coarse centre and radius (about +-2 px).
+//!    than the reference's brightest background) are masked.
+//! 2. Detection on 4x4 blocks: background level = median of `n` over the frame's outer
+//!    blocks, block noise from neighbour differences (both unaffected by a contact covering
+//!    much of the frame), each block's excess in grey levels (additive sensor noise);
+//!    candidates beyond 5 sigma, polarity by majority, re-threshold at half the candidates'
+//!    median level, largest 4-connected component with holes (the mirror) filled. Nothing
+//!    found = "no contact". This gives a coarse centre and radius (about +-2 px).
 //! 3. Area moment in a band: with the contact level `in(x, y)` and the background level
 //!    `out(x, y)` fitted as planes (robust least squares) in rings just inside and outside a
 //!    band of +-w px around the current edge model, each band pixel contributes the fraction
@@ -19,6 +21,11 @@
 //!    (`A_s = r_s^2 dtheta / 2`); an algebraic ellipse fit of those edge points gives the
 //!    centre, axes and angle. The band follows the fitted ellipse in a second pass.
 //!    Eccentricity = sin(tilt) for a circular contact seen obliquely.
+//! 5. The apex mirror may lie anywhere inside the contact: its pixels leave the level rings
+//!    and count as the model's sharp edge in the band; sectors whose edge runs behind it are
+//!    left out of the ellipse fit and take their area from the fitted shape (passes repeat
+//!    until it is stable). A mirror reaching out of the contact, an edge hidden on more than
+//!    half the rim or an inner level ring mostly covered: "no measurable contact".
 
 use super::ellipse_fit::{Ellipse, fit_ellipse};
 use super::linear_solve::solve;
@@ -43,8 +50,8 @@ pub struct ContactRadiusConfig {
     pub sectors: usize,
     /// Pixels at or above this grey level (in either frame) are ignored.
     pub saturation_level: u8,
-    /// Reference pixels brighter than this multiple of the reference's median are treated
-    /// as the apex mirror and ignored.
+    /// Reference pixels brighter than this multiple of the reference's 95th-percentile
+    /// block level are treated as the apex mirror and ignored.
     pub mirror_ratio: f64,
     /// Eccentricity above which the contact is flagged as tilted (0.35 = 20 degrees).
     pub tilt_eccentricity: f64,
@@ -92,12 +99,14 @@ pub struct ContactDisc {
 }
 
 /// Result for one frame. `contact` is false when no contact disc is found or its edge
-/// cannot be measured (within a few px of the apex mirror's rim, or a measurement that
-/// disagrees with the detection); `quality` is 0 then, else in (0, 1]:
+/// cannot be measured (the apex mirror reaching out of the contact, the edge behind the
+/// mirror on more than half the rim, the inner level ring mostly covered by the mirror, or
+/// a measurement that disagrees with the detection); `quality` is 0 then, else in (0, 1]:
 /// `1 / (1 + (radius_sigma_px / 0.1)^2)` (0.5 when the predicted error equals the 0.1 px
 /// target) times `1 / (1 + max(0, chi - 2)^2)` where chi is the sector radii's RMS about
 /// the ellipse over their predicted noise (an irregular, non-elliptical edge lowers it),
-/// times the visible fraction of the band.
+/// times the fraction of the rim whose edge is seen (inside the image, not behind the apex
+/// mirror).
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct ContactRadius {
     pub contact: bool,
@@ -120,13 +129,11 @@ pub enum VisionError {
 
 const BLOCK: usize = 4;
 
-/// Narrowest inner level ring next to the apex mirror, px (a 3 px ring around a 50 px
-/// contact still holds ~900 pixels for the level plane).
-const MIN_LEVEL_RING_PX: f64 = 3.0;
-/// Narrowest band next to the mirror, as a fraction of the configured half width: 4 px is
-/// 1.6 blur sigmas at the default 2.5 px; the blur tails cut off inside and outside a
-/// straight edge cancel, so the area stays unbiased to first order.
-const MIN_BAND_FRACTION: f64 = 0.5;
+/// Radius up to which the level rings have their configured width (see `band_pass`).
+const RING_FULL_WIDTH_RADIUS_PX: f64 = 120.0;
+/// Smallest fraction of the inner level ring left visible by the apex mirror (a quarter of
+/// a 12 px ring around a 45 px contact is still ~600 pixels for the level plane).
+const MIN_INNER_RING_VISIBLE: f64 = 0.25;
 /// A measured disc must agree with the block-level detection (about +-2 px): its radius
 /// within this fraction of the detected radius plus `DETECTION_SLACK_PX`, its centre
 /// within the same distance. A diverged edge model (a wrong level plane feeding a wild
@@ -204,6 +211,16 @@ fn median(v: &mut [f64]) -> f64 {
     }
     let mid = v.len() / 2;
     let (_, m, _) = v.select_nth_unstable_by(mid, f64::total_cmp);
+    *m
+}
+
+/// The `q` quantile (0..1) of `v` (reorders `v`); 0 when empty.
+fn quantile(v: &mut [f64], q: f64) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    let k = ((v.len() - 1) as f64 * q.clamp(0.0, 1.0)).round() as usize;
+    let (_, m, _) = v.select_nth_unstable_by(k, f64::total_cmp);
     *m
 }
 
@@ -303,6 +320,9 @@ struct Coarse {
     /// The detected blocks reach the image's edge: the disc may be clipped, and then its
     /// visible part's centre and radius are not the disc's.
     at_image_edge: bool,
+    /// Elliptical edge model from the blocks' second moments, when it is clearly not a
+    /// circle.
+    shape: Option<Ellipse>,
 }
 
 /// Sums from one band pass.
@@ -315,7 +335,12 @@ struct BandPass {
     /// Sector edge points (only sectors whose band is entirely inside the image).
     points: Vec<[f64; 2]>,
     point_sigma: f64,
+    /// Fraction of sectors whose band is inside the image.
     visible_fraction: f64,
+    /// Fraction of sectors whose edge is seen (inside the image, not behind the mirror).
+    seen_fraction: f64,
+    /// Some sectors' edges are behind the mirror: their area follows the edge model.
+    hidden: bool,
 }
 
 impl ContactRadiusEstimator {
@@ -332,7 +357,10 @@ impl ContactRadiusEstimator {
             .filter(|(_, m)| **m < config.saturation_level)
             .map(|(s, _)| f64::from(*s) / (BLOCK * BLOCK) as f64)
             .collect();
-        let mirror_level = config.mirror_ratio * median(&mut means).max(1.0);
+        // The mirror is judged against the brightest background (the 95th percentile of the
+        // block means), not the median: under strong vignetting the median is far below the
+        // centre's level, and the bright centre of the shell would be taken for the mirror.
+        let mirror_level = config.mirror_ratio * quantile(&mut means, 0.95).max(1.0);
         let mirror_disc = mirror_disc(
             &reference,
             mirror_level.min(f64::from(config.saturation_level)),
@@ -418,13 +446,18 @@ impl ContactRadiusEstimator {
         let Some(coarse) = self.detect(frame) else {
             return Ok(none);
         };
-        let mut model = Ellipse::circle(coarse.center, coarse.radius);
+        let mut model = coarse
+            .shape
+            .unwrap_or_else(|| Ellipse::circle(coarse.center, coarse.radius));
         let mut last: Option<(BandPass, Ellipse)> = None;
         // The band sum is exact while the true edge lies well inside the band (its blur
         // tail beyond 7 px of a 2.5 px blur holds < 1e-3 px of radius), so another pass
         // around the fitted shape is needed only when the shape moved by more than 2 px.
+        // Where the mirror hides part of the edge, that part's area is the model's, so the
+        // passes go on until the model is stable to 0.05 px (each pass shrinks the model's
+        // error by the hidden fraction of the rim, at most a half).
         let mut passes = 0;
-        for _pass in 0..3 {
+        for _pass in 0..6 {
             passes += 1;
             let Some(band) = self.band_pass(frame, &model) else {
                 break;
@@ -441,9 +474,10 @@ impl ContactRadiusEstimator {
                 .unwrap_or(model);
             let next = shape.scaled_to_radius(band.radius);
             let moved = max_edge_distance(&next, &model);
+            let (tolerance, max_passes) = if band.hidden { (0.05, 6) } else { (2.0, 3) };
             model = next;
             last = Some((band, next));
-            if moved < 2.0 {
+            if moved < tolerance || passes >= max_passes {
                 break;
             }
         }
@@ -460,7 +494,7 @@ impl ContactRadiusEstimator {
         let chi = fit_rms / band.point_sigma.max(1e-9);
         let quality =
             1.0 / (1.0 + (band.radius_sigma / 0.1).powi(2)) / (1.0 + (chi - 2.0).max(0.0).powi(2))
-                * band.visible_fraction;
+                * band.seen_fraction;
         let e = ellipse.eccentricity();
         Ok(ContactRadius {
             contact: true,
@@ -490,32 +524,72 @@ impl ContactRadiusEstimator {
         let (bw, bh) = (rb.bw, rb.bh);
         let area = (BLOCK * BLOCK) as f64;
         let sat = cfg.saturation_level;
+        // Per block: the normalised difference n and the grey-level difference d (block
+        // means); NaN where saturated or the mirror.
         let mut n = vec![f64::NAN; bw * bh];
-        let mut valid_vals = Vec::with_capacity(bw * bh);
-        for (i, ni) in n.iter_mut().enumerate() {
+        let mut d = vec![f64::NAN; bw * bh];
+        let mut ref_mean = vec![0.0; bw * bh];
+        let mut n_valid = 0usize;
+        for i in 0..bw * bh {
             let (fs, rs) = (f64::from(fb.sum[i]), f64::from(rb.sum[i]));
             if fb.max[i] < sat && rb.max[i] < sat && rs / area < self.mirror_level {
-                let v = (fs - rs) / rs.max(4.0 * area);
-                *ni = v;
-                valid_vals.push(v);
+                let r_mean = (rs / area).max(4.0);
+                d[i] = (fs - rs) / area;
+                n[i] = d[i] / r_mean;
+                ref_mean[i] = r_mean;
+                n_valid += 1;
             }
         }
-        if valid_vals.len() < 16 {
+        if n_valid < 16 || bw < 8 || bh < 8 {
             return None;
         }
-        // Median and MAD from every third valid block (thousands of samples: plenty for a
-        // robust location and scale, a third of the selection cost).
-        let mut sample: Vec<f64> = valid_vals.iter().step_by(3).copied().collect();
-        let med = median(&mut sample);
-        let sigma = robust_sigma(&mut sample, med).max(1e-6);
+        // Background level: the median of n over the frame's outer blocks (two deep). A
+        // contact whose edge is measurable leaves them free, and one cut by the image
+        // border covers well under half of them, so this holds at any contact size (the
+        // median over the whole frame does not once the contact covers a large part of it).
+        let mut border: Vec<f64> = Vec::with_capacity(4 * (bw + bh));
+        for y in 0..bh {
+            for x in 0..bw {
+                let edge = x < 2 || y < 2 || x + 2 >= bw || y + 2 >= bh;
+                let v = n[y * bw + x];
+                if edge && v.is_finite() {
+                    border.push(v);
+                }
+            }
+        }
+        if border.len() < 16 {
+            return None;
+        }
+        let med = median(&mut border);
+        // Noise of a block's grey-level difference, from differences between horizontal
+        // neighbours (a contact's edge is a small fraction of them, its slow illumination
+        // changes cancel): robust at any contact size. The sensor's noise is additive in
+        // grey levels, so a block's z-score is its grey-level excess over the background
+        // level; the normalised n would weigh the vignetted corners' noise up.
+        let mut diffs: Vec<f64> = Vec::with_capacity(n_valid);
+        for y in (0..bh).step_by(2) {
+            for x in 0..bw - 1 {
+                let (a, b) = (d[y * bw + x], d[y * bw + x + 1]);
+                if a.is_finite() && b.is_finite() {
+                    diffs.push(a - b);
+                }
+            }
+        }
+        if diffs.len() < 16 {
+            return None;
+        }
+        let sigma = (robust_sigma(&mut diffs, 0.0) / std::f64::consts::SQRT_2).max(1e-6);
         let thr = cfg.detect_sigma * sigma;
         let (mut pos, mut neg) = (Vec::new(), Vec::new());
-        for v in n.iter().filter(|v| v.is_finite()) {
-            let d = v - med;
-            if d > thr {
-                pos.push(d);
-            } else if d < -thr {
-                neg.push(-d);
+        for (v, r) in n.iter().zip(&ref_mean) {
+            if !v.is_finite() {
+                continue;
+            }
+            let dz = (v - med) * r;
+            if dz > thr {
+                pos.push(v - med);
+            } else if dz < -thr {
+                neg.push(med - v);
             }
         }
         let (sign, mut cands) = if pos.len() >= neg.len() {
@@ -527,10 +601,18 @@ impl ContactRadiusEstimator {
         if (cands.len() as f64) < min_blocks {
             return None;
         }
+        // Re-threshold at half the candidates' median contact level (n is flat over the
+        // contact whatever the illumination), and at least 2.5 block noise SDs so the noisy
+        // dark corners do not join the contact.
         let level = median(&mut cands);
         let mask: Vec<bool> = n
             .iter()
-            .map(|v| v.is_finite() && sign * (v - med) > 0.5 * level)
+            .zip(&ref_mean)
+            .map(|(v, r)| {
+                v.is_finite()
+                    && sign * (v - med) > 0.5 * level
+                    && sign * (v - med) * r > 2.5 * sigma
+            })
             .collect();
         let component = largest_component(&mask, bw, bh);
         if (component.len() as f64) < min_blocks {
@@ -544,37 +626,62 @@ impl ContactRadiusEstimator {
             span.0 = span.0.min(x);
             span.1 = span.1.max(x);
         }
+        // Area, centroid and second moments of the filled blocks (block units).
         let (mut cnt, mut sx, mut sy) = (0.0, 0.0, 0.0);
+        let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+        let sum_sq = |n: f64| n * (n + 1.0) * (2.0 * n + 1.0) / 6.0;
         for (y, &(lo, hi)) in row_span.iter().enumerate() {
             if lo <= hi {
-                let k = f64::from(hi - lo + 1);
+                let (l, h, yf) = (f64::from(lo), f64::from(hi), y as f64);
+                let k = h - l + 1.0;
+                let row_sx = k * 0.5 * (l + h);
                 cnt += k;
-                sx += k * 0.5 * (f64::from(lo) + f64::from(hi));
-                sy += k * y as f64;
+                sx += row_sx;
+                sy += k * yf;
+                sxx += sum_sq(h) - sum_sq(l - 1.0);
+                sxy += yf * row_sx;
+                syy += k * yf * yf;
             }
         }
         let b = BLOCK as f64;
-        let center = [
-            sx / cnt * b + (b - 1.0) / 2.0,
-            sy / cnt * b + (b - 1.0) / 2.0,
-        ];
+        let (mx, my) = (sx / cnt, sy / cnt);
+        let center = [mx * b + (b - 1.0) / 2.0, my * b + (b - 1.0) / 2.0];
         let radius = (cnt * area / std::f64::consts::PI).sqrt();
         let at_image_edge = component.iter().any(|&(x, y)| {
             x == 0 || y == 0 || usize::from(x) + 1 >= bw || usize::from(y) + 1 >= bh
         });
+        // Shape: a uniform ellipse's variance along an axis is (semi-axis)^2 / 4; each
+        // block adds its own 1/12 block^2. An elliptical contact (a tilt) then starts with
+        // an elliptical edge model, and its band pass needs no second pass to follow it.
+        let (cxx, cyy) = (
+            sxx / cnt - mx * mx - 1.0 / 12.0,
+            syy / cnt - my * my - 1.0 / 12.0,
+        );
+        let cxy = sxy / cnt - mx * my;
+        let (half_tr, det) = (0.5 * (cxx + cyy), cxx * cyy - cxy * cxy);
+        let disc = (half_tr * half_tr - det).max(0.0).sqrt();
+        let (l1, l2) = (half_tr + disc, half_tr - disc);
+        let shape = if at_image_edge || l2 <= 0.0 {
+            None
+        } else {
+            let (a, bb) = (2.0 * l1.sqrt() * b, 2.0 * l2.sqrt() * b);
+            // Below 2 px between the axes the circle is within the 2 px a pass tolerates.
+            (a - bb > 2.0).then(|| {
+                Ellipse {
+                    center_px: center,
+                    semi_major_px: a,
+                    semi_minor_px: bb,
+                    angle_rad: 0.5 * (2.0 * cxy).atan2(cxx - cyy),
+                }
+                .scaled_to_radius(radius)
+            })
+        };
         Some(Coarse {
             center,
             radius,
             at_image_edge,
+            shape,
         })
-    }
-
-    /// Width of the visible annulus between the apex mirror's masked disc and the model's
-    /// edge (along the shortest ray), px; `None` without a mirror.
-    fn mirror_gap_px(&self, model: &Ellipse) -> Option<f64> {
-        let (mc, r2) = self.mirror_disc?;
-        let d = (mc[0] - model.center_px[0]).hypot(mc[1] - model.center_px[1]);
-        Some(model.semi_minor_px - d - r2.sqrt())
     }
 
     /// Step 3 and 4 for one edge model.
@@ -584,21 +691,21 @@ impl ContactRadiusEstimator {
         let r_eq = model.equivalent_radius_px();
         // Shrink band and rings for small discs so the inner ring stays inside.
         let shrink = (r_eq / (cfg.band_half_width_px + cfg.level_ring_px + 3.0)).min(1.0);
-        let mut w = cfg.band_half_width_px * shrink;
-        let mut ring = cfg.level_ring_px * shrink;
-        // A contact just outside the apex mirror: the inner ring would lie in the mirror's
-        // mask, and a level fitted to the few pixels at the mask's rim is wrong (a 49 px
-        // contact once read 820 px). Narrow the inner ring to the visible annulus, then the
-        // band; an annulus too thin for both is not measurable.
-        if let Some(gap) = self.mirror_gap_px(model)
-            && gap < w + ring
-        {
-            ring = (gap - w).max(MIN_LEVEL_RING_PX);
-            w = gap - ring;
-            if w < MIN_BAND_FRACTION * cfg.band_half_width_px {
-                return None;
-            }
-        }
+        let w = cfg.band_half_width_px * shrink;
+        // Beyond `RING_FULL_WIDTH_RADIUS_PX` the rings narrow as 1/r, holding their pixel
+        // count (and cost) constant. A level error e moves every band pixel's fraction: the
+        // area by about (sum f) e / D against the band's own pixel noise sqrt(N_band) sigma
+        // / D; with e ~ sigma / sqrt(ring pixels) their ratio is sqrt(w / (2 ring)) per
+        // level, about 0.6 at the configured widths and 0.8 at 220 px, so the radius error
+        // still falls with the radius.
+        let ring = cfg.level_ring_px * shrink * (RING_FULL_WIDTH_RADIUS_PX / r_eq).min(1.0);
+        // The apex mirror (masked) may lie anywhere inside the contact, up to its edge (not
+        // beyond it, see `mirror_outside`): masked pixels leave the level rings; in the band
+        // they count as the model's sharp edge (f = 1 inside, 0 outside), and a sector with
+        // masked pixels in the edge's own zone (s > -w/2, where the blurred edge is still
+        // far from 1) is "hidden": its edge point is left out of the shape fit and its area
+        // follows the fitted shape (see `measure`, which iterates until that shape is
+        // stable).
         let (cx, cy) = (model.center_px[0], model.center_px[1]);
         let r_lo = (model.semi_minor_px - w - ring).max(0.0);
         let r_hi = model.semi_major_px + w + ring;
@@ -614,21 +721,67 @@ impl ContactRadiusEstimator {
         let (sin_a, cos_a) = model.angle_rad.sin_cos();
         let (ia, ib) = (1.0 / model.semi_major_px, 1.0 / model.semi_minor_px);
         let is_circle = (model.semi_major_px - model.semi_minor_px).abs() < 1e-9;
-        // Signed distance to the model edge (negative inside); exact for a circle, along
-        // the ray from the centre for an ellipse.
-        let signed = |dx: f64, dy: f64| -> f64 {
-            let q = (dx * dx + dy * dy).sqrt();
+        // Signed distance s to the model edge (negative inside), along the ray from the
+        // centre for an ellipse: s = R(theta) (rho - 1) with rho the ellipse's normalised
+        // radius and b <= R <= a, so the ranges of rho^2 below decide a pixel's class
+        // without the two square roots of the exact s, which only the classes' rims and
+        // masked band pixels need.
+        let signed = |dx: f64, dy: f64, rho2: f64| -> f64 {
+            if rho2 > 0.0 {
+                let q = (dx * dx + dy * dy).sqrt();
+                q - q / rho2.sqrt()
+            } else {
+                -model.semi_minor_px
+            }
+        };
+        let thr2 = |t: f64| if t <= 0.0 { -1.0 } else { t * t };
+        let k_all = w + ring;
+        let deep_inner2 = thr2(1.0 - k_all * ib);
+        let (in_ring_lo2, in_ring_hi2) = (thr2(1.0 - k_all * ia), thr2(1.0 - w * ib));
+        let (out_ring_lo2, out_ring_hi2) = (thr2(1.0 + w * ib), thr2(1.0 + k_all * ia));
+        let beyond2 = thr2(1.0 + k_all * ib);
+        // Certainly in the band (|s| <= w): s = R (rho - 1) with R <= a.
+        let (band_lo2, band_hi2) = (thr2(1.0 - w * ia), thr2(1.0 + w * ia));
+        // The x range (relative to the centre) of row dy inside the model scaled by t.
+        let (t_out, t_in) = (1.0 + k_all * ib, 1.0 - k_all * ib);
+        let ellipse_row = |t: f64, dy: f64| -> Option<(f64, f64)> {
+            let (ia2, ib2) = ((ia / t).powi(2), (ib / t).powi(2));
+            let alpha = cos_a * cos_a * ia2 + sin_a * sin_a * ib2;
+            let beta = dy * cos_a * sin_a * (ia2 - ib2);
+            let gamma = dy * dy * (sin_a * sin_a * ia2 + cos_a * cos_a * ib2) - 1.0;
+            let disc = beta * beta - alpha * gamma;
+            (disc >= 0.0 && alpha > 0.0).then(|| {
+                let root = disc.sqrt();
+                ((-beta - root) / alpha, (-beta + root) / alpha)
+            })
+        };
+        let classify = |dx: f64, dy: f64| -> f64 {
+            let u = (dx * cos_a + dy * sin_a) * ia;
+            let v = (-dx * sin_a + dy * cos_a) * ib;
+            let rho2 = u * u + v * v;
+            if rho2 > beyond2 {
+                k_all + 1.0
+            } else if rho2 < deep_inner2 {
+                -k_all - 1.0
+            } else if rho2 >= in_ring_lo2 && rho2 < in_ring_hi2 {
+                -w - 0.5 * ring
+            } else if rho2 > out_ring_lo2 && rho2 <= out_ring_hi2 {
+                w + 0.5 * ring
+            } else if rho2 > band_lo2 && rho2 <= band_hi2 {
+                f64::NAN
+            } else {
+                signed(dx, dy, rho2)
+            }
+        };
+        // The exact s of a band pixel, needed only where it is masked (its f is then the
+        // model's sharp edge, and its place decides "hidden" and "mirror outside").
+        let exact_s = |dx: f64, dy: f64| -> f64 {
             if is_circle {
-                q - model.semi_major_px
+                (dx * dx + dy * dy).sqrt() - model.semi_major_px
             } else {
                 let u = (dx * cos_a + dy * sin_a) * ia;
                 let v = (-dx * sin_a + dy * cos_a) * ib;
-                let rho = (u * u + v * v).sqrt();
-                if rho > 0.0 {
-                    q - q / rho
-                } else {
-                    -model.semi_minor_px
-                }
+                signed(dx, dy, u * u + v * v)
             }
         };
         let sq = |v: f64| v.max(0.0) * v.max(0.0);
@@ -648,22 +801,46 @@ impl ContactRadiusEstimator {
         inner_ring.reserve((perimeter * (ring + 1.0)) as usize);
         outer_ring.reserve((perimeter * (ring + 1.0)) as usize);
         let mut sector_clipped = vec![false; sectors];
+        let mut sector_hidden = vec![false; sectors];
+        let mut inner_total = 0usize;
+        let mut mirror_outside = false;
         let scale = 1.0 / r_hi.max(1.0);
         let y0 = (cy - r_hi).floor() as i64;
         let y1 = (cy + r_hi).ceil() as i64;
         for yi in y0..=y1 {
             let dy = yi as f64 - cy;
-            let span2 = r_hi * r_hi - dy * dy;
-            if span2 < 0.0 {
-                continue;
-            }
-            let span = span2.sqrt();
-            let (xa, xb) = ((cx - span).ceil() as i64, (cx + span).floor() as i64);
-            let hole = if dy.abs() < r_lo {
-                let s = (r_lo * r_lo - dy * dy).sqrt();
-                Some(((cx - s).ceil() as i64, (cx + s).floor() as i64))
+            let (xa, xb, hole) = if is_circle {
+                let span2 = r_hi * r_hi - dy * dy;
+                if span2 < 0.0 {
+                    continue;
+                }
+                let span = span2.sqrt();
+                let hole = if dy.abs() < r_lo {
+                    let s = (r_lo * r_lo - dy * dy).sqrt();
+                    Some(((cx - s).ceil() as i64, (cx + s).floor() as i64))
+                } else {
+                    None
+                };
+                ((cx - span).ceil() as i64, (cx + span).floor() as i64, hole)
             } else {
-                None
+                // The row's part of the outer ellipse (beyond it s > w + ring) around the
+                // inner one (inside it s < -w - ring).
+                let Some((lo, hi)) = ellipse_row(t_out, dy) else {
+                    continue;
+                };
+                let hole = if t_in > 0.0 {
+                    ellipse_row(t_in, dy)
+                        .map(|(l, h)| ((cx + l).ceil() as i64, (cx + h).floor() as i64))
+                } else {
+                    None
+                };
+                // Within the circle of radius r_hi (beyond it s > w + ring anyway), which
+                // also bounds the row for a very flat model.
+                (
+                    (cx + lo.max(-r_hi)).ceil() as i64,
+                    (cx + hi.min(r_hi)).floor() as i64,
+                    hole,
+                )
             };
             let row_inside = yi >= 0 && (yi as usize) < h_img;
             // Pixels inside the hole are all inner (f = 1): count them, no need to visit.
@@ -696,17 +873,21 @@ impl ContactRadiusEstimator {
                             w + 0.5 * ring
                         }
                     } else {
-                        d2.sqrt() - model.semi_major_px
+                        // In the band: NaN = "in the band, exact s not computed".
+                        f64::NAN
                     }
                 } else {
-                    signed(dx, dy)
+                    classify(dx, dy)
                 };
                 if s > w + ring {
                     continue;
                 }
+                let in_band = s.is_nan();
                 let inside_img = row_inside && xi >= 0 && (xi as usize) < w_img;
                 if !inside_img {
-                    if s >= -w {
+                    // Only the band matters: an outer ring cut by the image border still
+                    // has its visible pixels for the level.
+                    if in_band || (s >= -w && s <= w) {
                         sector_clipped[sector_of(dx, dy)] = true;
                     }
                     continue;
@@ -722,10 +903,23 @@ impl ContactRadiusEstimator {
                 let nv = if masked { f64::NAN } else { (iv - rv) * inv_r };
                 if s < -w {
                     n_inner += 1.0;
+                    inner_total += 1;
                     if !masked {
                         inner_ring.push([dx * scale, dy * scale, nv]);
                     }
-                } else if s <= w {
+                } else if in_band || s <= w {
+                    let s = if in_band && masked {
+                        exact_s(dx, dy)
+                    } else {
+                        s
+                    };
+                    if masked && s > -0.5 * w {
+                        sector_hidden[sector_of(dx, dy)] = true;
+                    }
+                    if inv_r.is_nan() && s > 0.5 * w {
+                        mirror_outside = true;
+                    }
+                    // s is only read for masked pixels (NaN n), where it is exact.
                     band.push((
                         [dx as f32, dy as f32, nv as f32, s as f32],
                         sector_of(dx, dy) as u16,
@@ -734,6 +928,18 @@ impl ContactRadiusEstimator {
                     outer_ring.push([dx * scale, dy * scale, nv]);
                 }
             }
+        }
+        // The mirror reaching out of the contact (masked reference pixels more than half a
+        // band outside the edge model) hides the edge over a stretch the shape cannot be
+        // trusted on, and the detection then sees a crescent, not the disc: such a contact,
+        // still largely behind the mirror, is not measured.
+        if mirror_outside {
+            return None;
+        }
+        // The inner level needs a fair part of its ring visible: a level fitted to a few
+        // pixels at the mirror's rim can be far off (a 49 px contact once read 820 px).
+        if (inner_ring.len() as f64) < (MIN_INNER_RING_VISIBLE * inner_total as f64).max(30.0) {
+            return None;
         }
         let (p_in, sig_in) = fit_plane(&inner_ring)?;
         let (p_out, sig_out) = fit_plane(&outer_ring)?;
@@ -779,6 +985,13 @@ impl ContactRadiusEstimator {
         let dtheta = std::f64::consts::TAU / sectors as f64;
         let visible: Vec<usize> = (0..sectors).filter(|&s| !sector_clipped[s]).collect();
         let visible_fraction = visible.len() as f64 / sectors as f64;
+        let seen = (0..sectors)
+            .filter(|&s| !sector_clipped[s] && !sector_hidden[s])
+            .count();
+        // The shape comes from the seen edge points: at least half the rim must be seen.
+        if 2 * seen < sectors {
+            return None;
+        }
         // Per-sector polar area: analytic inner part + band sum.
         let mut points = Vec::with_capacity(sectors);
         let mut sector_areas = vec![0.0; sectors];
@@ -788,7 +1001,7 @@ impl ContactRadiusEstimator {
             let r_inner = (model.polar_radius_px(ct, st) - w).max(0.0);
             let a_s = 0.5 * dtheta * r_inner * r_inner + sector_sum[s];
             sector_areas[s] = a_s;
-            if !sector_clipped[s] {
+            if !sector_clipped[s] && !sector_hidden[s] {
                 let r_s = (2.0 * a_s.max(0.0) / dtheta).sqrt();
                 points.push([cx + r_s * ct, cy + r_s * st]);
             }
@@ -826,6 +1039,8 @@ impl ContactRadiusEstimator {
             points,
             point_sigma,
             visible_fraction,
+            seen_fraction: seen as f64 / sectors as f64,
+            hidden: sector_hidden.iter().any(|&h| h),
         })
     }
 }
