@@ -532,6 +532,21 @@ impl Indentation {
         }
         self.set_tube_travel(h_mm);
         self.newton_logged(u, p_kpa, false)?;
+        // same state and load, updated multipliers: the last tangent still fits
+        self.augment_contact(u, settings, &mut |ind, u| {
+            ind.newton_logged(u, p_kpa, true).map(|_| ())
+        })
+    }
+
+    /// Uzawa augmentations of the contact multipliers after a converged solve: while the
+    /// largest penetration exceeds the tolerance (at most `settings.augmentations` times),
+    /// update the multipliers and `resolve` the equilibrium.
+    fn augment_contact(
+        &mut self,
+        u: &mut [f64],
+        settings: &SolverSettings,
+        resolve: &mut Resolve<'_>,
+    ) -> Result<(), NewtonFailure> {
         for _ in 0..settings.augmentations {
             let model = &self.model;
             if model.contacts.is_empty() {
@@ -552,8 +567,7 @@ impl Indentation {
             for contact in &mut self.model.contacts {
                 contact.augment(&|n: usize| pos_nodes[n]);
             }
-            // same state and load, updated multipliers: the last tangent still fits
-            self.newton_logged(u, p_kpa, true)?;
+            resolve(self, u)?;
         }
         Ok(())
     }
@@ -653,27 +667,11 @@ impl Indentation {
     ) -> Result<(), NewtonFailure> {
         self.model
             .solve_equilibrium_bordered(u, p_kpa, h, load_dofs, constraint, 1.0, target)?;
-        for _ in 0..settings.augmentations {
-            let model = &self.model;
-            let pos = |n: usize| model.position(u, n);
-            let penetration = model
-                .contacts
-                .iter()
-                .map(|c| c.max_penetration(&pos))
-                .fold(0.0, f64::max);
-            if penetration <= settings.penetration_tolerance_mm {
-                break;
-            }
-            let pos_nodes: Vec<[f64; 2]> = (0..model.mesh.nodes.len())
-                .map(|n| model.position(u, n))
-                .collect();
-            for contact in &mut self.model.contacts {
-                contact.augment(&|n: usize| pos_nodes[n]);
-            }
-            self.model
-                .solve_equilibrium_bordered(u, p_kpa, h, load_dofs, constraint, 1.0, target)?;
-        }
-        Ok(())
+        self.augment_contact(u, settings, &mut |ind, u| {
+            ind.model
+                .solve_equilibrium_bordered(u, p_kpa, h, load_dofs, constraint, 1.0, target)
+                .map(|_| ())
+        })
     }
 
     /// Curve outputs at the state `u`.
@@ -793,6 +791,9 @@ fn consistent_pressure(current: &[[f64; 2]], forces: &[f64], end: usize) -> Vec<
     }
     out
 }
+
+/// A re-solve of the equilibrium after the contact multipliers changed.
+type Resolve<'a> = dyn FnMut(&mut Indentation, &mut [f64]) -> Result<(), NewtonFailure> + 'a;
 
 /// Apex-displacement increment of the snap-through path ([`Indentation::trace_snap_through`]).
 const SNAP_US_STEP_MM: f64 = 0.01;

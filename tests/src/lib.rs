@@ -35,3 +35,23 @@ pub fn start_test_daemon(dir: &Path, idle_stream_hz: u16) -> (DaemonHandle, Path
     .expect("the simulated daemon starts");
     (daemon, token_file)
 }
+
+/// Polls job `id` until it finishes; fails the test if it takes longer than `limit`.
+///
+/// # Panics
+/// If the daemon does not answer or the job outlives `limit`.
+#[allow(clippy::unwrap_used)] // test support: a failure here is the test's failure
+pub fn wait_job(client: &daemon::Client, id: u64, limit: std::time::Duration) -> daemon::api::Job {
+    let t0 = std::time::Instant::now();
+    loop {
+        let j = client.job(id).unwrap();
+        if j.state.is_finished() {
+            return j;
+        }
+        assert!(
+            t0.elapsed() < limit,
+            "job {id} not finished in {limit:?}: {j:?}"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+}

@@ -17,7 +17,7 @@ use std::time::{Duration, Instant};
 use daemon::api::{ExperimentRequest, Job, JobState, PressureSetting};
 use daemon::{Client, DaemonHandle};
 use experiment::record_meta::{RecordMeta, RecordStatus};
-use system_tests::temp_dir;
+use system_tests::{temp_dir, wait_job};
 
 fn shared_calibration() -> &'static Path {
     static DIR: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
@@ -57,21 +57,6 @@ fn bench(name: &str, modulus_kpa: f64) -> (DaemonHandle, Client, PathBuf) {
         std::thread::sleep(Duration::from_millis(50));
     }
     (daemon, client, dir)
-}
-
-fn wait_job(client: &Client, id: u64, limit: Duration) -> Job {
-    let t0 = Instant::now();
-    loop {
-        let j = client.job(id).unwrap();
-        if j.state.is_finished() {
-            return j;
-        }
-        assert!(
-            t0.elapsed() < limit,
-            "job {id} not finished in {limit:?}: {j:?}"
-        );
-        std::thread::sleep(Duration::from_millis(100));
-    }
 }
 
 /// What one automatic-pressure job on a sample of `modulus_kpa` gave.

@@ -19,27 +19,12 @@ use std::time::{Duration, Instant};
 use daemon::api::{Event, ExperimentRequest, Job, JobState};
 use daemon::{Client, DaemonHandle};
 use protocol::{FrameDecoder, Request, RequestFrame};
-use system_tests::{start_test_daemon, temp_dir};
+use system_tests::{start_test_daemon, temp_dir, wait_job};
 
 struct Bench {
     daemon: DaemonHandle,
     client: Client,
     dir: std::path::PathBuf,
-}
-
-fn wait_job(client: &Client, id: u64, limit: Duration) -> Job {
-    let t0 = Instant::now();
-    loop {
-        let j = client.job(id).unwrap();
-        if j.state.is_finished() {
-            return j;
-        }
-        assert!(
-            t0.elapsed() < limit,
-            "job {id} not finished in {limit:?}: {j:?}"
-        );
-        std::thread::sleep(Duration::from_millis(100));
-    }
 }
 
 /// One calibration for every test of this file, made by the same routine the daemon's
