@@ -353,15 +353,7 @@ pub fn run(
             names.push(w.label.clone());
             names.join(" + ")
         };
-        let after = gap_of(
-            &label_after,
-            &f,
-            outcome
-                .load
-                .as_ref()
-                .zip(w.load_chi2)
-                .map(|(lc, l)| (lc, l)),
-        );
+        let after = gap_of(&label_after, &f, outcome.load.as_ref().zip(w.load_chi2));
         let named = named_effects(&current_model, &w.candidate, &f);
         steps.push(ForwardStep {
             step: steps.len() + 1,
