@@ -139,8 +139,12 @@ fn check_pair(a: Hidden, b: Hidden, seed: u64) {
             .and_then(|e| e.parameters.get(h.kind.parameter().0))
             .expect("diagnosis test setup");
         let (v, se) = (
-            p.get("value").and_then(serde_json::Value::as_f64).unwrap_or(f64::NAN),
-            p.get("se").and_then(serde_json::Value::as_f64).unwrap_or(f64::NAN),
+            p.get("value")
+                .and_then(serde_json::Value::as_f64)
+                .unwrap_or(f64::NAN),
+            p.get("se")
+                .and_then(serde_json::Value::as_f64)
+                .unwrap_or(f64::NAN),
         );
         assert!(
             (v - h.size).abs() < (4.0 * se).max(0.3 * h.size.abs()),
@@ -151,7 +155,10 @@ fn check_pair(a: Hidden, b: Hidden, seed: u64) {
     }
     let first = d.gap_shrink.expect("diagnosis test setup");
     let all = d.forward.gap_shrink.expect("diagnosis test setup");
-    assert!(all > first, "gap shrink {first:.3} with the first, {all:.3} with both");
+    assert!(
+        all > first,
+        "gap shrink {first:.3} with the first, {all:.3} with both"
+    );
 }
 
 #[test]

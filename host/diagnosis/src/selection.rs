@@ -189,7 +189,14 @@ pub fn held_out(
     theta0: f64,
     load: Option<&LoadChannel>,
 ) -> Option<HeldOut> {
-    let (scheme, sp) = splits(points, subset, cand.kind.needs_all_pressures());
+    // by depth also when the model already includes such an effect (its refit on one pressure
+    // would be as undetermined as the candidate's)
+    let by_depth = cand.kind.needs_all_pressures()
+        || model
+            .included
+            .iter()
+            .any(|(c, _)| c.kind.needs_all_pressures());
+    let (scheme, sp) = splits(points, subset, by_depth);
     let (mut base, mut candc, mut n) = (0.0, 0.0, 0);
     for (a, b) in &sp {
         if a.len() < 4 || b.len() < 4 {
