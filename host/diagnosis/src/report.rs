@@ -307,11 +307,22 @@ fn forward_text(s: &mut String, d: &Diagnosis) {
             _ => String::new(),
         }
     );
+    // grouped by the included effect and the reason
+    let mut groups: Vec<(&str, &str, Vec<&str>)> = Vec::new();
     for n in &f.not_testable {
+        match groups
+            .iter_mut()
+            .find(|g| g.0 == n.with.as_str() && g.1 == n.reason.as_str())
+        {
+            Some(g) => g.2.push(&n.effect),
+            None => groups.push((&n.with, &n.reason, vec![&n.effect])),
+        }
+    }
+    for (with, reason, effects) in groups {
         let _ = writeln!(
             s,
-            "  not tested: {} with {}: {}",
-            n.effect, n.with, n.reason
+            "  not tested with {with}: {} ({reason})",
+            effects.join(", ")
         );
     }
     if let Some(g) = &f.final_model {
