@@ -1,6 +1,7 @@
 //! Diagnosis (docs/diagnosis.md): find where the baseline model and a measurement
 //! disagree, name the missing effect from a library of candidates, add it and show the gap
-//! shrink. It decides from the data alone.
+//! shrink; then, with it in the model, name what remains (forward selection). It decides
+//! from the data alone.
 //!
 //! - [`data`]: the measured points (pressures, replicates);
 //! - [`tables`]: the fem-core effect tables (thickness, friction, strain stiffening);
@@ -11,6 +12,8 @@
 //! - [`candidates`]: the candidate library; [`signatures`]: their residual signatures;
 //! - [`selection`]: screening, bootstrap threshold, held-out check, information criteria;
 //! - [`verdict`]: effect / none / unexplained / ambiguous; [`report`]: text, JSON, plots;
+//! - [`forward`]: forward selection of several effects (the next one against the model with
+//!   the earlier ones included);
 //! - [`simulate`]: hidden-effect data from hil-sim for tests and the confusion matrix.
 
 pub mod candidates;
