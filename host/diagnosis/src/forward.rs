@@ -339,7 +339,15 @@ pub fn run(
             baseline_gap.clone()
         } else {
             gap_of(
-                "model so far",
+                &format!(
+                    "baseline + {}",
+                    current_model
+                        .included
+                        .iter()
+                        .map(|(c, _)| c.label())
+                        .collect::<Vec<_>>()
+                        .join(" + ")
+                ),
                 &outcome.base,
                 outcome.load.as_ref().map(|lc| (lc, lc.baseline_chi2)),
             )
@@ -351,7 +359,7 @@ pub fn run(
                 .map(|(c, _)| c.label())
                 .collect();
             names.push(w.label.clone());
-            names.join(" + ")
+            format!("baseline + {}", names.join(" + "))
         };
         let after = gap_of(&label_after, &f, outcome.load.as_ref().zip(w.load_chi2));
         let named = named_effects(&current_model, &w.candidate, &f);
