@@ -6,7 +6,9 @@
 //! (chi^2 per dof) by more than 10 %.
 //!
 //! The default suite runs three cheap cases (one physical from a table, one hereditary, one
-//! measurement effect); every effect runs with
+//! measurement effect) and one pair (a thinner sample with a displacement offset: the
+//! forward selection must name both); every effect, and the pair of friction with a camera
+//! scale, run with
 //! `cargo test --release -p system-tests --test diagnose_hidden_effects -- --ignored`.
 
 use diagnosis::candidates::EffectKind;
@@ -96,4 +98,99 @@ fn every_effect_at_a_clear_size_is_named_and_the_gap_shrinks() {
         .map(|(_, kind)| kind.name())
         .collect();
     assert!(failed.is_empty(), "not named or no gap shrink: {failed:?}");
+}
+
+/// Two hidden effects at once: the forward selection must name both (in either order), the
+/// final model must shrink the gap further than the first effect alone, and each named
+/// parameter must lie within 4 standard errors or 30 % of its true size (a joint fit of
+/// three parameters on data whose truth is a direct solve, not the table the model reads:
+/// the table-error term and the parameter correlation widen the scatter beyond the
+/// table-generated case of `diagnosis/tests/forward.rs`).
+fn check_pair(a: Hidden, b: Hidden, seed: u64) {
+    let (base, effects) = tables();
+    let points = simulate(&SimSpec {
+        modulus_kpa: 170.0,
+        hidden: Some(a),
+        also_hidden: vec![b],
+        seed,
+        ..SimSpec::default()
+    })
+    .expect("diagnosis test setup");
+    let options = DiagnoseOptions {
+        bootstrap: 200,
+        confidence_reruns: 0,
+        seed,
+        ..DiagnoseOptions::default()
+    };
+    let d = diagnose(&base, &effects, points, &options).expect("diagnosis test setup");
+    let text = diagnosis::report::text(&d);
+    eprintln!("{text}");
+    let names: Vec<&str> = d.effects.iter().map(|e| e.effect.as_str()).collect();
+    assert!(
+        names.len() == 2 && names.contains(&a.kind.name()) && names.contains(&b.kind.name()),
+        "named {names:?}\n{text}"
+    );
+    assert_eq!(d.effect.as_deref(), Some(names[0]));
+    for h in [a, b] {
+        let p = d
+            .effects
+            .iter()
+            .find(|e| e.effect == h.kind.name())
+            .and_then(|e| e.parameters.get(h.kind.parameter().0))
+            .expect("diagnosis test setup");
+        let (v, se) = (
+            p.get("value")
+                .and_then(serde_json::Value::as_f64)
+                .unwrap_or(f64::NAN),
+            p.get("se")
+                .and_then(serde_json::Value::as_f64)
+                .unwrap_or(f64::NAN),
+        );
+        assert!(
+            (v - h.size).abs() < (4.0 * se).max(0.3 * h.size.abs()),
+            "{}: {v:.4} +- {se:.4}, true {}",
+            h.kind.name(),
+            h.size
+        );
+    }
+    let first = d.gap_shrink.expect("diagnosis test setup");
+    let all = d.forward.gap_shrink.expect("diagnosis test setup");
+    assert!(
+        all > first,
+        "gap shrink {first:.3} with the first, {all:.3} with both"
+    );
+}
+
+#[test]
+fn a_thinner_sample_with_a_displacement_offset_names_both() {
+    check_pair(
+        Hidden {
+            kind: EffectKind::FiniteThickness,
+            size: 1.5,
+        },
+        Hidden {
+            kind: EffectKind::DisplacementOffset,
+            size: 0.04,
+        },
+        31,
+    );
+}
+
+#[test]
+// Currently fails: the camera scale is named first (0.035, absorbing friction's radius
+// signature too) and friction's remaining gain on the radius (4.8) stays below the step's
+// threshold (8.1); the loads rank candidates but do not detect (docs/diagnosis.md).
+#[ignore = "friction solves; currently fails (see above); run with --release -- --ignored --nocapture"]
+fn friction_with_a_camera_scale_names_both() {
+    check_pair(
+        Hidden {
+            kind: EffectKind::Friction,
+            size: 0.4,
+        },
+        Hidden {
+            kind: EffectKind::RadiusScale,
+            size: 0.03,
+        },
+        32,
+    );
 }

@@ -202,11 +202,118 @@ pub fn predict_a(
     predict(model, cand, e, theta, pt, Channel::Radius)
 }
 
-/// Predicted value of `channel` at `pt`. The load channel follows the same effects: the
-/// table effects read their load column, the hereditary one the load at the secant modulus;
-/// the camera effects (radius offset and scale) and adhesion (JKR enlarges the contact at
-/// the load the elastic model carries, as in the simulator) leave the load as the baseline's.
+/// Predicted value of `channel` at `pt`, with the effects the model already includes
+/// ([`Model::included`], at their stored parameters) and `cand` at `theta` on top. The load
+/// channel follows the same effects: the table effects read their load column, the
+/// hereditary one the load at the secant modulus; the camera effects (radius offset and
+/// scale) and adhesion (JKR enlarges the contact at the load the elastic model carries, as in
+/// the simulator) leave the load as the baseline's.
 pub fn predict(
+    model: &Model<'_>,
+    cand: Option<&Candidate>,
+    e: f64,
+    theta: f64,
+    pt: &Point,
+    channel: Channel,
+) -> f64 {
+    if model.included.is_empty() {
+        return predict_single(model, cand, e, theta, pt, channel);
+    }
+    let thetas: Vec<f64> = model.included.iter().map(|(_, t)| *t).collect();
+    predict_with(model, &thetas, cand, e, theta, pt, channel)
+}
+
+/// Predicted value of `channel` at `pt` at the parameters of fit `f` of `cand` (its modulus,
+/// its parameter and its refitted included effects).
+pub fn predict_fit(
+    model: &Model<'_>,
+    cand: Option<&Candidate>,
+    f: &super::fitting::GlsFit,
+    pt: &Point,
+    channel: Channel,
+) -> f64 {
+    if f.included.len() != model.included.len() {
+        return predict(model, cand, f.modulus_kpa, f.theta, pt, channel);
+    }
+    predict_with(
+        model,
+        &f.included,
+        cand,
+        f.modulus_kpa,
+        f.theta,
+        pt,
+        channel,
+    )
+}
+
+/// Why effect `b` cannot be added to a model that includes `a` (None: they combine).
+///
+/// The measurement-side effects (radius offset and scale, displacement offset, pressure
+/// offset) are transformations of whatever the sample model predicts (the camera's
+/// a_cam = (1 + s) a + a0 as in the simulator; the proximity reading and the manometer shift
+/// the point where the sample model is read), so they combine with each other and with any
+/// one physical effect. Two physical effects do not: each effect table varies one effect
+/// about the 7 mm frictionless neo-Hookean sample, no table holds two axes, and adding two
+/// tables' deltas would assume an interaction nobody has solved for; the elastic-family
+/// approximations (viscoelastic, adhesion) are not validated on top of a table effect either.
+pub fn incompatibility(a: EffectKind, b: EffectKind) -> Option<&'static str> {
+    if a == b {
+        Some("already in the model")
+    } else if a.is_physical() && b.is_physical() {
+        Some(
+            "two physical effects: each effect table varies one effect about the baseline sample and no table holds both, so the pair cannot be evaluated together",
+        )
+    } else {
+        None
+    }
+}
+
+/// Predicted value of `channel` at `pt` with the model's included effects at `included`
+/// (one parameter each, in the order of [`Model::included`]) and `cand` at `theta`. The
+/// effects compose as the bench does: the manometer and the proximity sensor move the point
+/// (p_air - p0, u_s - u0) at which the sample (baseline, or its one physical effect) is read,
+/// and the camera sees (1 + s) a + a0.
+pub fn predict_with(
+    model: &Model<'_>,
+    included: &[f64],
+    cand: Option<&Candidate>,
+    e: f64,
+    theta: f64,
+    pt: &Point,
+    channel: Channel,
+) -> f64 {
+    let mut physical: Option<(&Candidate, f64)> = None;
+    let (mut dp, mut du, mut a0, mut s) = (0.0, 0.0, 0.0, 0.0);
+    let all = model
+        .included
+        .iter()
+        .zip(included)
+        .map(|((c, _), t)| (c, *t))
+        .chain(cand.map(|c| (c, theta)));
+    for (c, t) in all {
+        match c.kind {
+            EffectKind::PressureOffset => dp += t,
+            EffectKind::DisplacementOffset => du += t,
+            EffectKind::RadiusOffset => a0 += t,
+            EffectKind::RadiusScale => s += t,
+            _ => physical = Some((c, t)),
+        }
+    }
+    let q = Point {
+        p_air_kpa: pt.p_air_kpa - dp,
+        u_s_mm: pt.u_s_mm - du,
+        ..*pt
+    };
+    let (c, t) = physical.map_or((None, 0.0), |(c, t)| (Some(c), t));
+    let v = predict_single(model, c, e, t, &q, channel);
+    match channel {
+        Channel::Radius => v * (1.0 + s) + a0,
+        Channel::Load => v,
+    }
+}
+
+/// Predicted value of `channel` at `pt` with `cand` alone on the baseline.
+fn predict_single(
     model: &Model<'_>,
     cand: Option<&Candidate>,
     e: f64,

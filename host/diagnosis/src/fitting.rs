@@ -4,13 +4,17 @@
 //! effect parameter kept in its allowed range. The parameter covariance is (J^T J)^-1 in
 //! whitened units, inflated by max(1, chi^2/dof) when the fit is poor (the usual
 //! scale-factor correction), and the 95 % interval of E2 is exp(ln E2 +- 1.96 se).
+//!
+//! When the model already includes effects ([`Model::included`], added by the forward
+//! selection), their parameters are fitted jointly with the modulus and the candidate's
+//! parameter, each kept in its range, from the model's stored values.
 
 use serde::Serialize;
 
-use super::candidates::{Candidate, predict_a};
+use super::candidates::{Candidate, predict_with};
 use super::data::Point;
 use super::linalg;
-use super::model::Model;
+use super::model::{Channel, Model};
 use super::noise_model::Whitener;
 
 /// Result of one fit.
@@ -21,6 +25,12 @@ pub struct GlsFit {
     /// Effect parameter (0 for the baseline).
     pub theta: f64,
     pub theta_se: f64,
+    /// Parameters of the model's included effects, refitted jointly (in the order of
+    /// [`Model::included`]; empty for a model without them), and their standard errors.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub included: Vec<f64>,
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub included_se: Vec<f64>,
     pub chi2: f64,
     pub points: usize,
     pub parameters: usize,
@@ -47,18 +57,31 @@ pub fn fit(
 ) -> Option<GlsFit> {
     let moduli = model.base.moduli_kpa();
     let (ln_lo, ln_hi) = (moduli[0].ln(), moduli[moduli.len() - 1].ln());
-    let k = if cand.is_some() { 2 } else { 1 };
-    let (t_lo, t_hi) = cand.map_or((0.0, 0.0), |c| {
-        let (_, lo, hi) = c.kind.parameter();
-        (lo, hi)
-    });
+    // parameters: ln E2, the candidate's (if any), then the included effects'
+    let c_off = usize::from(cand.is_some());
+    let m = model.included.len();
+    let k = 1 + c_off + m;
+    let mut lo = vec![ln_lo];
+    let mut hi = vec![ln_hi];
+    let mut steps = vec![1e-3];
+    for c in cand
+        .iter()
+        .map(|c| **c)
+        .chain(model.included.iter().map(|(c, _)| *c))
+    {
+        let (_, l, h) = c.kind.parameter();
+        lo.push(l);
+        hi.push(h);
+        steps.push(c.kind.step());
+    }
     let n_all = points.len();
     let residual = |q: &[f64]| -> Option<(Vec<f64>, Vec<f64>)> {
         let e = q[0].exp();
-        let th = if k == 2 { q[1] } else { 0.0 };
+        let th = if c_off == 1 { q[1] } else { 0.0 };
+        let inc = &q[1 + c_off..];
         let mut r = vec![0.0; n_all];
         for &i in subset {
-            let a = predict_a(model, cand, e, th, &points[i]);
+            let a = predict_with(model, inc, cand, e, th, &points[i], Channel::Radius);
             if !a.is_finite() {
                 return None;
             }
@@ -69,8 +92,11 @@ pub fn fit(
     };
     let chi2 = |w: &[f64]| w.iter().map(|v| v * v).sum::<f64>();
     let mut q = vec![e0.ln().clamp(ln_lo, ln_hi)];
-    if k == 2 {
-        q.push(theta0.clamp(t_lo, t_hi));
+    if c_off == 1 {
+        q.push(theta0.clamp(lo[1], hi[1]));
+    }
+    for (j, (_, t)) in model.included.iter().enumerate() {
+        q.push(t.clamp(lo[1 + c_off + j], hi[1 + c_off + j]));
     }
     let (mut r, mut w) = residual(&q)?;
     let mut s = chi2(&w);
@@ -82,16 +108,9 @@ pub fn fit(
         // Jacobian of the whitened prediction: -(d w / d q)
         jac.clear();
         for c in 0..k {
-            let mut h = if c == 0 {
-                1e-3
-            } else {
-                cand.map_or(1e-3, |cd| cd.kind.step())
-            };
+            let mut h = steps[c];
             let mut qp = q.clone();
-            if c == 1 && qp[1] + h > t_hi {
-                h = -h;
-            }
-            if c == 0 && qp[0] + h > ln_hi {
+            if qp[c] + h > hi[c] {
                 h = -h;
             }
             qp[c] += h;
@@ -117,11 +136,9 @@ pub fn fit(
                 lambda *= 10.0;
                 continue;
             };
-            let mut qn = q.clone();
-            qn[0] = (qn[0] + delta[0]).clamp(ln_lo, ln_hi);
-            if k == 2 {
-                qn[1] = (qn[1] + delta[1]).clamp(t_lo, t_hi);
-            }
+            let qn: Vec<f64> = (0..k)
+                .map(|c| (q[c] + delta[c]).clamp(lo[c], hi[c]))
+                .collect();
             if let Some((rn, wn)) = residual(&qn) {
                 let sn = chi2(&wn);
                 if sn < s {
@@ -156,13 +173,16 @@ pub fn fit(
     let scale = (s / dof).max(1.0);
     let cov = linalg::inverse_spd(&jtj, k).unwrap_or_else(|| vec![f64::INFINITY; k * k]);
     let se_ln = (cov[0] * scale).sqrt();
-    let theta_se = if k == 2 { (cov[3] * scale).sqrt() } else { 0.0 };
+    let se = |c: usize| (cov[c * k + c] * scale).sqrt();
+    let theta_se = if c_off == 1 { se(1) } else { 0.0 };
     let rms = (subset.iter().map(|&i| r[i] * r[i]).sum::<f64>() / n.max(1) as f64).sqrt();
     Some(GlsFit {
         modulus_kpa: q[0].exp(),
         ci95_kpa: [(q[0] - 1.96 * se_ln).exp(), (q[0] + 1.96 * se_ln).exp()],
-        theta: if k == 2 { q[1] } else { 0.0 },
+        theta: if c_off == 1 { q[1] } else { 0.0 },
         theta_se,
+        included: q[1 + c_off..].to_vec(),
+        included_se: (1 + c_off..k).map(se).collect(),
         chi2: s,
         points: n,
         parameters: k,

@@ -1,6 +1,7 @@
 //! Diagnosis (docs/diagnosis.md): find where the baseline model and a measurement
 //! disagree, name the missing effect from a library of candidates, add it and show the gap
-//! shrink. It decides from the data alone.
+//! shrink; then, with it in the model, name what remains (forward selection). It decides
+//! from the data alone.
 //!
 //! - [`data`]: the measured points (pressures, replicates);
 //! - [`tables`]: the fem-core effect tables (thickness, friction, strain stiffening);
@@ -11,6 +12,8 @@
 //! - [`candidates`]: the candidate library; [`signatures`]: their residual signatures;
 //! - [`selection`]: screening, bootstrap threshold, held-out check, information criteria;
 //! - [`verdict`]: effect / none / unexplained / ambiguous; [`report`]: text, JSON, plots;
+//! - [`forward`]: forward selection of several effects (the next one against the model with
+//!   the earlier ones included);
 //! - [`simulate`]: hidden-effect data from hil-sim for tests and the confusion matrix.
 
 pub mod candidates;
@@ -19,6 +22,7 @@ pub mod confusion;
 pub mod data;
 pub mod errors_in_variables;
 pub mod fitting;
+pub mod forward;
 pub mod linalg;
 pub mod load_channel;
 pub mod localisation;
@@ -158,6 +162,13 @@ pub struct Diagnosis {
     pub ambiguity_pairs: Vec<AmbiguousPair>,
     pub minimum_detectable: Vec<MinimumDetectable>,
     pub held_out: Option<HeldOut>,
+    /// The effects of the final model of the forward selection, in the order they were
+    /// added, with their jointly fitted parameters (the first is `effect`; empty when no
+    /// effect is named).
+    pub effects: Vec<forward::NamedEffect>,
+    /// The forward selection: each step's effect, parameters and gap shrink, why it stopped,
+    /// the pairs it cannot test, and the final model.
+    pub forward: forward::ForwardSelection,
     pub points_used: usize,
     pub points_excluded: usize,
     pub notes: Vec<String>,
@@ -334,76 +345,21 @@ pub fn diagnose(
     let points = points_used;
     let subset = all;
 
-    // 3. baseline GLS fit, signatures, threshold, screening
-    let prelim = run_selection(
-        &model, &cands, &points, &subset, &whitener, e_host, None, 0, None,
+    // 3. baseline GLS fit, signatures, threshold, screening, held-out checks, decision
+    let first = forward::step(
+        &model, &cands, &points, &subset, &noise, &whitener, e_host, options,
     )
     .ok_or(DiagnoseError::BaselineFit)?;
-    // the load channel, when every used point has a load (a prediction check of each refit)
-    let load = LoadChannel::new(&model, &points, &subset, prelim.base.modulus_kpa);
+    let load = first.load.clone();
     if load.is_none() {
         notes.push("no load channel in the selection (loads missing on some points, or no replicates to estimate their noise): candidates are ranked on the contact radius alone".into());
     }
-    let threshold = selection::bootstrap_threshold(
-        &prelim.sigs,
-        whitener.len(),
-        options.bootstrap,
-        options.seed,
-    );
+    let threshold = first.threshold.clone();
     let t95 = threshold.delta_chi2_95;
-    let base_fit = prelim.base;
-    let sigs = prelim.sigs;
-    let mut screened = selection::screen_and_refit(
-        &model,
-        &sigs,
-        &points,
-        &subset,
-        &whitener,
-        &base_fit,
-        t95,
-        options.refit,
-        load.as_ref(),
-    );
-    for s in screened.iter_mut() {
-        if let Some(f) = &s.fit
-            && (s.passes_threshold || s.delta_chi2.is_some_and(|d| d > 0.5 * t95))
-        {
-            s.held_out = selection::held_out(
-                &model,
-                &s.candidate,
-                &points,
-                &subset,
-                &noise,
-                f.modulus_kpa,
-                f.theta,
-                load.as_ref(),
-            );
-            if s.passes_threshold
-                && let Some(h) = s.held_out.as_mut()
-                && h.confirms
-            {
-                // calibrated margin: without it any improvement confirmed (selection.rs)
-                match selection::held_out_margin(
-                    &model,
-                    &s.candidate,
-                    &points,
-                    &subset,
-                    &whitener,
-                    &base_fit,
-                    f.theta,
-                    selection::HELD_OUT_DRAWS,
-                    options.seed ^ 0x4e1d,
-                    load.as_ref(),
-                ) {
-                    Some(m) => {
-                        h.margin_chi2 = m.max(0.0);
-                        h.confirms = h.gain() > h.margin_chi2;
-                    }
-                    None => h.confirms = false,
-                }
-            }
-        }
-    }
+    let base_fit = first.base.clone();
+    let sigs = first.sigs.clone();
+    let screened = first.screened.clone();
+    let decision = first.decision.clone();
     let ambiguity_pairs = signatures::ambiguous_pairs(&sigs);
 
     // 4. localisation
@@ -463,16 +419,8 @@ pub fn diagnose(
         lack_of_fit,
     };
 
-    // 5. verdict
+    // 5. verdict (decided in the step above)
     let n = subset.len();
-    let decision = verdict::decide(&screened, localisation.lack_of_fit.p_value, |i| {
-        screened[i].fit.as_ref().map(|f| {
-            (
-                stats::chi2_sf(f.chi2, n.saturating_sub(2).max(1) as f64),
-                base_fit.chi2_per_dof / f.chi2_per_dof.max(1e-300),
-            )
-        })
-    });
     let minimum_detectable = verdict::minimum_detectable(&sigs, t95);
     let winner = decision.winner.map(|i| screened[i].clone());
 
@@ -572,6 +520,10 @@ pub fn diagnose(
     let gap_shrink = augmented
         .as_ref()
         .map(|a| baseline.chi2_per_dof / a.chi2_per_dof.max(1e-300));
+    // 8. forward selection: what remains once the named effect is in the model
+    let forward = forward::run(
+        &model, &cands, &points, &subset, &noise, &whitener, options, &first,
+    );
     let parameters = match (&winner, named) {
         (Some(w), true) => {
             let f = w.fit.as_ref();
@@ -695,6 +647,8 @@ pub fn diagnose(
         ambiguity_pairs,
         minimum_detectable,
         held_out: held,
+        effects: forward.effects.clone(),
+        forward,
         points_used: n,
         points_excluded: excluded,
         notes,

@@ -18,7 +18,7 @@
 
 use serde::Serialize;
 
-use super::candidates::{Candidate, predict};
+use super::candidates::{Candidate, predict, predict_fit};
 use super::data::Point;
 use super::model::{Channel, Model};
 use super::noise_model::{NoiseModel, PressureNoise, Whitener};
@@ -84,6 +84,28 @@ impl LoadChannel {
         for &i in subset {
             let v = Channel::Load.measured(&points[i])
                 - predict(model, cand, e, theta, &points[i], Channel::Load);
+            if !v.is_finite() {
+                return None;
+            }
+            r[i] = v;
+        }
+        Some(self.whitener.whiten(&r).iter().map(|v| v * v).sum())
+    }
+
+    /// chi^2_P of fit `f` of `cand` (None: the model without a candidate) over
+    /// `points[subset]`, at the fit's parameters including its refitted included effects.
+    pub fn chi2_fit(
+        &self,
+        model: &Model<'_>,
+        cand: Option<&Candidate>,
+        points: &[Point],
+        subset: &[usize],
+        f: &super::fitting::GlsFit,
+    ) -> Option<f64> {
+        let mut r = vec![0.0; points.len()];
+        for &i in subset {
+            let v = Channel::Load.measured(&points[i])
+                - predict_fit(model, cand, f, &points[i], Channel::Load);
             if !v.is_finite() {
                 return None;
             }

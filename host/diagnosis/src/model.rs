@@ -169,6 +169,11 @@ pub struct Model<'a> {
     pub base: Surface<'a>,
     pub base_lut: &'a Lut,
     pub axes: Vec<AxisSurfaces<'a>>,
+    /// Effects already added to the model by the forward selection, with their current
+    /// parameters (empty: the baseline). Every prediction includes them
+    /// ([`super::candidates::predict`]); the fits refit their parameters jointly with the
+    /// modulus ([`super::fitting::fit`]).
+    pub included: Vec<(super::candidates::Candidate, f64)>,
 }
 
 impl<'a> Model<'a> {
@@ -198,6 +203,7 @@ impl<'a> Model<'a> {
             base,
             base_lut,
             axes,
+            included: Vec::new(),
         })
     }
 

@@ -223,6 +223,7 @@ pub fn text(d: &Diagnosis) -> String {
     if let Some(gs) = d.gap_shrink {
         let _ = writeln!(s, "  gap shrink (chi2/dof before / after): {gs:.2}");
     }
+    forward_text(&mut s, d);
     let _ = writeln!(
         s,
         "\n{} points used, {} outside the table's u_s range; {:.2} s",
@@ -232,6 +233,120 @@ pub fn text(d: &Diagnosis) -> String {
         let _ = writeln!(s, "note: {n}");
     }
     s
+}
+
+/// "name = value +- se" of a parameter map ([`super::forward::parameter_map`]).
+fn parameters_inline(p: &serde_json::Value) -> String {
+    let Some(obj) = p.as_object() else {
+        return String::new();
+    };
+    obj.iter()
+        .map(|(k, v)| {
+            match (
+                v.get("value").and_then(serde_json::Value::as_f64),
+                v.get("se").and_then(serde_json::Value::as_f64),
+            ) {
+                (Some(x), Some(se)) => format!("{k} = {x:.4} +- {se:.4}"),
+                _ => match v.as_f64() {
+                    Some(x) => format!("{k} = {x:.4}"),
+                    None => format!("{k} = {v}"),
+                },
+            }
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// The forward selection's steps, stop and final model.
+fn forward_text(s: &mut String, d: &Diagnosis) {
+    let f = &d.forward;
+    if f.steps.is_empty() {
+        return;
+    }
+    let _ = writeln!(
+        s,
+        "\nforward selection (each step refits the modulus and the effects found so far, then scores the remaining candidates against that model with the same calibrated threshold and held-out check):"
+    );
+    for st in &f.steps {
+        let _ = writeln!(
+            s,
+            "  step {}: + {:<22} {}  (refit gain {:.1} vs threshold {:.1}; held-out gain {} vs margin {})",
+            st.step,
+            st.label,
+            parameters_inline(&st.parameters),
+            st.delta_chi2,
+            st.threshold_chi2,
+            st.held_out_gain.map_or("-".into(), |v| format!("{v:.1}")),
+            st.held_out_margin.map_or("-".into(), |v| format!("{v:.1}")),
+        );
+        for r in &st.refitted {
+            let _ = writeln!(
+                s,
+                "          refitted {:<17} {}",
+                r.label,
+                parameters_inline(&r.parameters)
+            );
+        }
+        let _ = writeln!(
+            s,
+            "          chi2/dof {:.3} -> {:.3} (gap shrink {:.2}), E2 {:.1} -> {:.1} kPa",
+            st.before.chi2_per_dof,
+            st.after.chi2_per_dof,
+            st.gap_shrink,
+            st.before.modulus_kpa,
+            st.after.modulus_kpa
+        );
+    }
+    let _ = writeln!(
+        s,
+        "  stop: {}{}",
+        f.stop.reason,
+        match (&f.stop.best, f.stop.best_delta_chi2, f.stop.threshold_chi2) {
+            (Some(b), Some(dc), Some(t)) =>
+                format!(" (best remaining: {b}, refit gain {dc:.1} vs threshold {t:.1})"),
+            _ => String::new(),
+        }
+    );
+    // grouped by the included effect and the reason
+    let mut groups: Vec<(&str, &str, Vec<&str>)> = Vec::new();
+    for n in &f.not_testable {
+        match groups
+            .iter_mut()
+            .find(|g| g.0 == n.with.as_str() && g.1 == n.reason.as_str())
+        {
+            Some(g) => g.2.push(&n.effect),
+            None => groups.push((&n.with, &n.reason, vec![&n.effect])),
+        }
+    }
+    for (with, reason, effects) in groups {
+        let _ = writeln!(
+            s,
+            "  not tested with {with}: {} ({reason})",
+            effects.join(", ")
+        );
+    }
+    if let Some(g) = &f.final_model {
+        let _ = writeln!(
+            s,
+            "  final model: baseline + {}",
+            f.effects
+                .iter()
+                .map(|e| format!("{} ({})", e.label, parameters_inline(&e.parameters)))
+                .collect::<Vec<_>>()
+                .join(" + ")
+        );
+        let _ = writeln!(
+            s,
+            "  E2 = {:.1} kPa ({:.1} .. {:.1}) after, {:.1} kPa before; chi2/dof {:.3} -> {:.3} (gap shrink {:.2})",
+            g.modulus_kpa,
+            g.ci95_kpa[0],
+            g.ci95_kpa[1],
+            f.modulus_before_kpa,
+            d.baseline.chi2_per_dof,
+            g.chi2_per_dof,
+            f.gap_shrink.unwrap_or(f64::NAN)
+        );
+    }
 }
 
 /// JSON object of the diagnosis.

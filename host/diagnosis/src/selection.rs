@@ -138,20 +138,20 @@ pub fn splits(points: &[Point], subset: &[usize], by_depth: bool) -> (String, Ve
     )
 }
 
-/// Whitened chi^2 of `points[predict]` under a fit's parameters.
+/// Whitened chi^2 of `points[predict]` under fit `f`'s parameters.
 fn predict_chi2(
     model: &Model<'_>,
     cand: Option<&Candidate>,
     points: &[Point],
     predict: &[usize],
     noise: &NoiseModel,
-    e: f64,
-    theta: f64,
+    f: &GlsFit,
 ) -> Option<f64> {
     let w = noise.whitener(points, predict)?;
     let mut r = vec![0.0; points.len()];
     for &i in predict {
-        r[i] = points[i].a_mm - super::candidates::predict_a(model, cand, e, theta, &points[i]);
+        r[i] = points[i].a_mm
+            - super::candidates::predict_fit(model, cand, f, &points[i], Channel::Radius);
     }
     Some(w.whiten(&r).iter().map(|v| v * v).sum())
 }
@@ -189,7 +189,14 @@ pub fn held_out(
     theta0: f64,
     load: Option<&LoadChannel>,
 ) -> Option<HeldOut> {
-    let (scheme, sp) = splits(points, subset, cand.kind.needs_all_pressures());
+    // by depth also when the model already includes such an effect (its refit on one pressure
+    // would be as undetermined as the candidate's)
+    let by_depth = cand.kind.needs_all_pressures()
+        || model
+            .included
+            .iter()
+            .any(|(c, _)| c.kind.needs_all_pressures());
+    let (scheme, sp) = splits(points, subset, by_depth);
     let (mut base, mut candc, mut n) = (0.0, 0.0, 0);
     for (a, b) in &sp {
         if a.len() < 4 || b.len() < 4 {
@@ -198,16 +205,8 @@ pub fn held_out(
         let wa = noise.whitener(points, a)?;
         let fb = fit(model, None, points, a, &wa, e0, 0.0, 30)?;
         let fc = fit(model, Some(cand), points, a, &wa, e0, theta0, 30)?;
-        base += predict_chi2(model, None, points, b, noise, fb.modulus_kpa, 0.0)?;
-        candc += predict_chi2(
-            model,
-            Some(cand),
-            points,
-            b,
-            noise,
-            fc.modulus_kpa,
-            fc.theta,
-        )?;
+        base += predict_chi2(model, None, points, b, noise, &fb)?;
+        candc += predict_chi2(model, Some(cand), points, b, noise, &fc)?;
         n += b.len();
     }
     if n == 0 {
@@ -218,8 +217,8 @@ pub fn held_out(
         let w = noise.whitener(points, subset)?;
         let fb = fit(model, None, points, subset, &w, e0, 0.0, 30)?;
         let fc = fit(model, Some(cand), points, subset, &w, e0, theta0, 30)?;
-        load_b = Some(lc.chi2(model, None, points, subset, fb.modulus_kpa, 0.0)?);
-        load_c = Some(lc.chi2(model, Some(cand), points, subset, fc.modulus_kpa, fc.theta)?);
+        load_b = Some(lc.chi2_fit(model, None, points, subset, &fb)?);
+        load_c = Some(lc.chi2_fit(model, Some(cand), points, subset, &fc)?);
     }
     let mut h = HeldOut {
         scheme: if load.is_some() {
@@ -269,11 +268,11 @@ pub fn held_out_margin(
     let e = base.modulus_kpa;
     let f0: Vec<f64> = points
         .iter()
-        .map(|p| super::candidates::predict_a(model, None, e, 0.0, p))
+        .map(|p| super::candidates::predict_fit(model, None, base, p, Channel::Radius))
         .collect();
     let f0_load: Vec<f64> = points
         .iter()
-        .map(|p| super::candidates::predict(model, None, e, 0.0, p, Channel::Load))
+        .map(|p| super::candidates::predict_fit(model, None, base, p, Channel::Load))
         .collect();
     let mut g = Gauss::new(seed);
     let mut gains = Vec::with_capacity(draws);
@@ -427,14 +426,7 @@ pub fn screen_and_refit(
             s.passes_threshold = d > threshold;
             if let Some(lc) = load {
                 let l = lc
-                    .chi2(
-                        model,
-                        Some(&s.candidate),
-                        points,
-                        subset,
-                        f.modulus_kpa,
-                        f.theta,
-                    )
+                    .chi2_fit(model, Some(&s.candidate), points, subset, &f)
                     .unwrap_or(lc.baseline_chi2);
                 s.load_chi2 = Some(l);
                 s.delta_load_chi2 = Some(lc.baseline_chi2 - l);

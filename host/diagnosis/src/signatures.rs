@@ -3,15 +3,17 @@
 //! g_perp = g - j (j.g)/(j.j), g = L^-1 d f/d theta, j = L^-1 d f/d ln E2 (the
 //! linearised least-squares geometry, e.g. Seber & Wild 1989 ch. 2). The score statistic of
 //! a candidate on whitened residuals w is (g_perp.w)^2 / |g_perp|^2 (one-sided effects count
-//! only the sign they can produce); two candidates whose signatures have |cos| above
+//! only the sign they can produce). When the model already includes effects (forward
+//! selection), the directions of their parameters, which the refit also moves, are projected
+//! out too (Gram–Schmidt after the modulus direction). Two candidates whose signatures have |cos| above
 //! [`AMBIGUITY_COS`] cannot be told apart by this experiment and form an ambiguity group.
 
 use serde::Serialize;
 
-use super::candidates::{Candidate, predict_a};
+use super::candidates::{Candidate, predict_a, predict_with};
 use super::data::Point;
 use super::linalg::dot;
-use super::model::Model;
+use super::model::{Channel, Model};
 use super::noise_model::Whitener;
 
 /// Signatures more aligned than this (|cos|) are reported as indistinguishable.
@@ -96,6 +98,40 @@ pub fn signatures(
         h,
     );
     let jj = dot(&j, &j).max(1e-300);
+    // the included effects' directions, orthonormalised against j and each other
+    let mut basis: Vec<Vec<f64>> = Vec::new();
+    for (m, (c, t)) in model.included.iter().enumerate() {
+        let (_, _, hi) = c.kind.parameter();
+        let step = if t + c.kind.step() > hi {
+            -c.kind.step()
+        } else {
+            c.kind.step()
+        };
+        let mut th: Vec<f64> = model.included.iter().map(|(_, t)| *t).collect();
+        th[m] += step;
+        let mut g = whitened_derivative(
+            points,
+            subset,
+            whitener,
+            &f0,
+            |p| predict_with(model, &th, None, e, 0.0, p, Channel::Radius),
+            step,
+        );
+        let k = dot(&j, &g) / jj;
+        for (a, b) in g.iter_mut().zip(&j) {
+            *a -= k * b;
+        }
+        for b in &basis {
+            let k = dot(&g, b);
+            for (a, bb) in g.iter_mut().zip(b) {
+                *a -= k * bb;
+            }
+        }
+        let norm = dot(&g, &g).sqrt();
+        if norm > 1e-12 {
+            basis.push(g.iter().map(|v| v / norm).collect());
+        }
+    }
     let mut sigs = Vec::new();
     for c in candidates {
         let (_, lo, hi) = c.kind.parameter();
@@ -121,7 +157,13 @@ pub fn signatures(
                 probe,
             );
             let k = dot(&j, &g) / jj;
-            let g_perp: Vec<f64> = g.iter().zip(&j).map(|(a, b)| a - k * b).collect();
+            let mut g_perp: Vec<f64> = g.iter().zip(&j).map(|(a, b)| a - k * b).collect();
+            for b in &basis {
+                let k = dot(&g_perp, b);
+                for (a, bb) in g_perp.iter_mut().zip(b) {
+                    *a -= k * bb;
+                }
+            }
             let norm = dot(&g_perp, &g_perp).sqrt();
             sigs.push(Signature {
                 candidate: *c,

@@ -48,6 +48,9 @@ pub struct SimSpec {
     pub pressures_kpa: Vec<f64>,
     pub replicates: usize,
     pub hidden: Option<Hidden>,
+    /// Further hidden effects on top of `hidden` (several discrepancies at once; at most one
+    /// of each kind, the physical ones in one sample).
+    pub also_hidden: Vec<Hidden>,
     /// Noise level (1 = the demo's).
     pub noise: f64,
     pub fps: f64,
@@ -63,6 +66,7 @@ impl Default for SimSpec {
             pressures_kpa: vec![6.0, 15.0],
             replicates: 5,
             hidden: None,
+            also_hidden: Vec::new(),
             noise: 1.0,
             fps: 30.0,
             speed_mm_per_s: 1.0,
@@ -111,7 +115,7 @@ pub fn truth_scenario(spec: &SimSpec) -> Scenario {
     let mut effects = EffectsConfig::default();
     let mut pressures = spec.pressures_kpa.clone();
     let mut factors = vec![1.0];
-    if let Some(h) = spec.hidden {
+    for h in spec.hidden.iter().chain(&spec.also_hidden) {
         match h.kind {
             EffectKind::FiniteThickness => s.sample.thickness_mm -= h.size,
             EffectKind::Friction => s.sample.friction = h.size,
@@ -229,13 +233,13 @@ pub fn simulate_with(spec: &SimSpec, scenario: &Scenario, truth: &Truth) -> Vec<
     let dt = 1.0 / spec.fps;
     let substeps = 10;
     let mut out = Vec::new();
-    let offset = match spec.hidden {
-        Some(Hidden {
-            kind: EffectKind::PressureOffset,
-            size,
-        }) => size,
-        _ => 0.0,
-    };
+    let offset: f64 = spec
+        .hidden
+        .iter()
+        .chain(&spec.also_hidden)
+        .filter(|h| h.kind == EffectKind::PressureOffset)
+        .map(|h| h.size)
+        .sum();
     for &p_set in &spec.pressures_kpa {
         let p_true = p_set - offset;
         for test in 0..spec.replicates {

@@ -53,7 +53,8 @@ pub struct DiagnoseArgs {
     /// With --build-tables: only these (thickness, friction, stiffening).
     #[arg(long, value_delimiter = ',')]
     pub only: Vec<String>,
-    /// Simulate hidden-effect data with hil-sim: EFFECT=SIZE (e.g. friction=0.4) or none;
+    /// Simulate hidden-effect data with hil-sim: EFFECT=SIZE (e.g. friction=0.4), several
+    /// joined by commas (e.g. finite_thickness=1.5,displacement_offset=0.04), or none;
     /// writes simulated.csv into --out.
     #[arg(long, value_name = "EFFECT=SIZE")]
     pub simulate: Option<String>,
@@ -189,29 +190,48 @@ fn load_tables(args: &DiagnoseArgs) -> Result<Tables, String> {
 fn simulate(args: &DiagnoseArgs, spec: &str) -> ExitCode {
     use diagnosis::candidates::EffectKind;
     use diagnosis::simulate::{Hidden, SimSpec, simulate, to_curve_csv};
-    let hidden = if spec == "none" {
-        None
-    } else {
-        let Some((name, size)) = spec.split_once('=') else {
-            return bad_input(format!("--simulate {spec}: expected EFFECT=SIZE or none"));
-        };
-        let Some(kind) = EffectKind::from_name(name) else {
-            return bad_input(format!(
-                "--simulate: unknown effect {name:?} (known: {})",
-                EffectKind::ALL.map(|k| k.name()).join(", ")
-            ));
-        };
-        let Ok(size) = size.parse::<f64>() else {
-            return bad_input(format!("--simulate: size {size:?} is not a number"));
-        };
-        Some(Hidden { kind, size })
-    };
+    // EFFECT=SIZE[,EFFECT=SIZE...]: several hidden effects at once
+    let mut all_hidden: Vec<Hidden> = Vec::new();
+    if spec != "none" {
+        for part in spec.split(',') {
+            let Some((name, size)) = part.split_once('=') else {
+                return bad_input(format!(
+                    "--simulate {spec}: expected EFFECT=SIZE[,EFFECT=SIZE...] or none"
+                ));
+            };
+            let Some(kind) = EffectKind::from_name(name) else {
+                return bad_input(format!(
+                    "--simulate: unknown effect {name:?} (known: {})",
+                    EffectKind::ALL.map(|k| k.name()).join(", ")
+                ));
+            };
+            let Ok(size) = size.parse::<f64>() else {
+                return bad_input(format!("--simulate: size {size:?} is not a number"));
+            };
+            if all_hidden.iter().any(|h| h.kind == kind) {
+                return bad_input(format!("--simulate: {name} given twice"));
+            }
+            if kind.is_physical()
+                && let Some(other) = all_hidden.iter().find(|h| h.kind.is_physical())
+            {
+                return bad_input(format!(
+                    "--simulate: {name} and {}: at most one physical effect (the diagnosis cannot evaluate two together)",
+                    other.kind.name()
+                ));
+            }
+            all_hidden.push(Hidden { kind, size });
+        }
+    }
+    let mut rest = all_hidden.into_iter();
+    let hidden = rest.next();
+    let also_hidden: Vec<Hidden> = rest.collect();
     let Some(dir) = &args.out else {
         return bad_input("--simulate needs --out DIR");
     };
     let sim = SimSpec {
         modulus_kpa: args.modulus,
         hidden,
+        also_hidden,
         noise: args.noise,
         seed: args.seed,
         ..SimSpec::default()

@@ -1,0 +1,487 @@
+//! Forward selection: several effects at once.
+//!
+//! Step 1 is the single-effect selection ([`super::selection`], [`super::verdict`]). When it
+//! names an effect (verdict `effect`), the effect is added to the model
+//! ([`Model::included`]) at its fitted parameter and the selection is run again on the same
+//! data with that model as the null: the model's fit (the modulus and the included effects'
+//! parameters, jointly, [`super::fitting::fit`]), the signatures of the remaining candidates
+//! with the modulus and the included parameters' directions projected out, the bootstrap
+//! threshold recomputed from those signatures by the same procedure (95th percentile of the
+//! largest null improvement), the refits (every parameter free), the held-out check with its
+//! margin calibrated on data simulated from the step's model, and the same decision rule.
+//! No constant is tuned per step. A candidate that passes is added and the search repeats;
+//! it stops when none passes (`none`), when the best leaves an unexplained misfit or is
+//! ambiguous with another (the step's verdict says which), or after [`MAX_EFFECTS`] effects.
+//!
+//! This is the classical forward stepwise search (Efroymson 1960; e.g. Hastie, Tibshirani &
+//! Friedman, *The Elements of Statistical Learning*, 2009, sec. 3.3.2) with the score test's
+//! calibrated threshold as the entry criterion. Like any forward search it is greedy: it
+//! cannot undo an earlier choice, and two effects whose signatures are close are resolved at
+//! step 1 by whichever explains more.
+//!
+//! Combinations ([`super::candidates::incompatibility`]): measurement-side effects compose
+//! with anything; two physical effects are never evaluated together (no table holds two
+//! effect axes), and the report lists each such pair as not tested.
+
+use serde::Serialize;
+
+use super::candidates::{Candidate, EffectKind, incompatibility};
+use super::data::Point;
+use super::fitting::GlsFit;
+use super::load_channel::LoadChannel;
+use super::model::Model;
+use super::noise_model::{NoiseModel, Whitener};
+use super::selection::{self, Screened, Threshold};
+use super::signatures::Signature;
+use super::verdict::{self, Decision, Verdict};
+use super::{DiagnoseOptions, GapSummary, stats};
+
+/// At most this many effects are added (the data of one experiment, two pressures of a few
+/// replicates, rarely support more parameters than the modulus and three effects).
+pub const MAX_EFFECTS: usize = 3;
+
+/// One run of the selection with a given model as the null.
+#[derive(Debug, Clone)]
+pub struct StepOutcome {
+    pub base: GlsFit,
+    pub sigs: Vec<Signature>,
+    pub threshold: Threshold,
+    pub screened: Vec<Screened>,
+    pub load: Option<LoadChannel>,
+    pub decision: Decision,
+}
+
+/// The selection against `model` (with its included effects) among `cands`: fit, signatures,
+/// bootstrap threshold, screening and refits, held-out checks with calibrated margins, and
+/// the verdict, the model's fit starting at modulus `e0`. None when the model's fit does not
+/// converge.
+#[allow(clippy::too_many_arguments)]
+pub fn step(
+    model: &Model<'_>,
+    cands: &[Candidate],
+    points: &[Point],
+    subset: &[usize],
+    noise: &NoiseModel,
+    whitener: &Whitener,
+    e0: f64,
+    options: &DiagnoseOptions,
+) -> Option<StepOutcome> {
+    let prelim = super::run_selection(model, cands, points, subset, whitener, e0, None, 0, None)?;
+    // the load channel, when every used point has a load (a prediction check of each refit)
+    let load = LoadChannel::new(model, points, subset, prelim.base.modulus_kpa);
+    let threshold = selection::bootstrap_threshold(
+        &prelim.sigs,
+        whitener.len(),
+        options.bootstrap,
+        options.seed,
+    );
+    let t95 = threshold.delta_chi2_95;
+    let base = prelim.base;
+    let sigs = prelim.sigs;
+    let mut screened = selection::screen_and_refit(
+        model,
+        &sigs,
+        points,
+        subset,
+        whitener,
+        &base,
+        t95,
+        options.refit,
+        load.as_ref(),
+    );
+    for s in screened.iter_mut() {
+        if let Some(f) = &s.fit
+            && (s.passes_threshold || s.delta_chi2.is_some_and(|d| d > 0.5 * t95))
+        {
+            s.held_out = selection::held_out(
+                model,
+                &s.candidate,
+                points,
+                subset,
+                noise,
+                f.modulus_kpa,
+                f.theta,
+                load.as_ref(),
+            );
+            if s.passes_threshold
+                && let Some(h) = s.held_out.as_mut()
+                && h.confirms
+            {
+                // calibrated margin: without it any improvement confirmed (selection.rs)
+                match selection::held_out_margin(
+                    model,
+                    &s.candidate,
+                    points,
+                    subset,
+                    whitener,
+                    &base,
+                    f.theta,
+                    selection::HELD_OUT_DRAWS,
+                    options.seed ^ 0x4e1d,
+                    load.as_ref(),
+                ) {
+                    Some(m) => {
+                        h.margin_chi2 = m.max(0.0);
+                        h.confirms = h.gain() > h.margin_chi2;
+                    }
+                    None => h.confirms = false,
+                }
+            }
+        }
+    }
+    // the model's lack of fit (for the first step the localisation's chi^2 test: the same
+    // whitened residuals, n - 1 degrees of freedom)
+    let n = subset.len();
+    let lof_p = stats::chi2_sf(base.chi2, n.saturating_sub(base.parameters).max(1) as f64);
+    let decision = verdict::decide(&screened, lof_p, |i| {
+        screened[i].fit.as_ref().map(|f| {
+            (
+                stats::chi2_sf(f.chi2, n.saturating_sub(f.parameters).max(1) as f64),
+                base.chi2_per_dof / f.chi2_per_dof.max(1e-300),
+            )
+        })
+    });
+    Some(StepOutcome {
+        base,
+        sigs,
+        threshold,
+        screened,
+        load,
+        decision,
+    })
+}
+
+/// The parameters of `cand` at `value` +- `se` as the report gives them (the effect's
+/// parameter, the relaxation length of a viscoelastic variant, the sample thickness of a
+/// thinner sample).
+pub fn parameter_map(cand: &Candidate, value: f64, se: f64) -> serde_json::Value {
+    let (pname, _, _) = cand.kind.parameter();
+    let mut m = serde_json::Map::new();
+    m.insert(
+        pname.into(),
+        serde_json::json!({ "value": value, "se": se }),
+    );
+    if let Some(t) = cand.tau_h_mm {
+        m.insert("relaxation_travel_mm".into(), serde_json::json!(t));
+    }
+    if cand.kind == EffectKind::FiniteThickness {
+        m.insert(
+            "sample_thickness_mm".into(),
+            serde_json::json!(super::tables::EffectAxis::Thickness.base_value() - value),
+        );
+    }
+    serde_json::Value::Object(m)
+}
+
+/// One effect of the final model with its parameters from the final joint fit.
+#[derive(Debug, Clone, Serialize)]
+pub struct NamedEffect {
+    pub effect: String,
+    pub label: String,
+    pub parameters: serde_json::Value,
+}
+
+/// One step of the forward selection that added an effect.
+#[derive(Debug, Clone, Serialize)]
+pub struct ForwardStep {
+    pub step: usize,
+    pub effect: String,
+    pub label: String,
+    /// The added effect's parameters as fitted at this step.
+    pub parameters: serde_json::Value,
+    /// The effects included before it, refitted jointly at this step (in order).
+    pub refitted: Vec<NamedEffect>,
+    /// chi^2 improvement of the refit and the step's calibrated threshold.
+    pub delta_chi2: f64,
+    pub threshold_chi2: f64,
+    /// Held-out gain and its calibrated margin.
+    pub held_out_gain: Option<f64>,
+    pub held_out_margin: Option<f64>,
+    /// The model before (baseline plus the effects of the earlier steps) and after.
+    pub before: GapSummary,
+    pub after: GapSummary,
+    /// chi^2/dof before over after (the gap measure of the single-effect report).
+    pub gap_shrink: f64,
+}
+
+/// Why the search stopped.
+#[derive(Debug, Clone, Serialize)]
+pub struct ForwardStop {
+    /// The verdict of the last step's selection (`none`: no remaining candidate passes).
+    pub verdict: Verdict,
+    pub reason: String,
+    /// The best remaining candidate, its improvement and the step's threshold.
+    pub best: Option<String>,
+    pub best_delta_chi2: Option<f64>,
+    pub threshold_chi2: Option<f64>,
+}
+
+/// A pair the library cannot evaluate together.
+#[derive(Debug, Clone, Serialize)]
+pub struct NotTestable {
+    pub effect: String,
+    pub with: String,
+    pub reason: String,
+}
+
+/// The whole forward selection.
+#[derive(Debug, Clone, Serialize)]
+pub struct ForwardSelection {
+    pub steps: Vec<ForwardStep>,
+    pub stop: ForwardStop,
+    pub not_testable: Vec<NotTestable>,
+    /// The effects of the final model with their jointly fitted parameters (in order).
+    pub effects: Vec<NamedEffect>,
+    /// The final model's gap (None when no effect was added).
+    pub final_model: Option<GapSummary>,
+    pub modulus_before_kpa: f64,
+    pub modulus_after_kpa: f64,
+    /// Baseline chi^2/dof over the final model's.
+    pub gap_shrink: Option<f64>,
+}
+
+fn gap_of(label: &str, f: &GlsFit, load: Option<(&LoadChannel, f64)>) -> GapSummary {
+    let mut g = GapSummary::of(label, f, None);
+    g.load_chi2_per_point = load.map(|(lc, chi2)| chi2 / lc.whitener.len().max(1) as f64);
+    g
+}
+
+fn stop_of(o: &StepOutcome, reason: &str) -> ForwardStop {
+    let best = o.screened.iter().find(|s| s.fit.is_some());
+    ForwardStop {
+        verdict: o.decision.verdict,
+        reason: reason.to_string(),
+        best: best.map(|s| s.label.clone()),
+        best_delta_chi2: best.and_then(|s| s.delta_chi2),
+        threshold_chi2: Some(o.threshold.delta_chi2_95),
+    }
+}
+
+/// The model's effects at the parameters of `f` (a fit of `cand` on `model`): the included
+/// ones at their refitted values, then `cand`.
+fn named_effects(model: &Model<'_>, cand: &Candidate, f: &GlsFit) -> Vec<NamedEffect> {
+    let mut out: Vec<NamedEffect> = model
+        .included
+        .iter()
+        .enumerate()
+        .map(|(j, (c, t))| NamedEffect {
+            effect: c.kind.name().into(),
+            label: c.label(),
+            parameters: parameter_map(
+                c,
+                f.included.get(j).copied().unwrap_or(*t),
+                f.included_se.get(j).copied().unwrap_or(f64::NAN),
+            ),
+        })
+        .collect();
+    out.push(NamedEffect {
+        effect: cand.kind.name().into(),
+        label: cand.label(),
+        parameters: parameter_map(cand, f.theta, f.theta_se),
+    });
+    out
+}
+
+/// Continues the search after the first step `first` (run on `model` without included
+/// effects among `cands`): adds its winner when the verdict is `effect` and repeats.
+#[allow(clippy::too_many_arguments)]
+pub fn run(
+    model: &Model<'_>,
+    cands: &[Candidate],
+    points: &[Point],
+    subset: &[usize],
+    noise: &NoiseModel,
+    whitener: &Whitener,
+    options: &DiagnoseOptions,
+    first: &StepOutcome,
+) -> ForwardSelection {
+    let baseline_gap = gap_of(
+        "baseline",
+        &first.base,
+        first.load.as_ref().map(|lc| (lc, lc.baseline_chi2)),
+    );
+    let mut current_model = model.clone();
+    let mut outcome = first.clone();
+    let mut steps: Vec<ForwardStep> = Vec::new();
+    let mut not_testable: Vec<NotTestable> = Vec::new();
+    let mut effects: Vec<NamedEffect> = Vec::new();
+    let mut final_fit: Option<(GlsFit, GapSummary)> = None;
+    let stop = loop {
+        // an ambiguous first step still names its best effect (the report's `effect`), but
+        // the search does not build on a choice the data cannot make
+        let ambiguous_first = steps.is_empty() && outcome.decision.verdict == Verdict::Ambiguous;
+        let (Verdict::Effect | Verdict::Ambiguous, Some(wi)) =
+            (outcome.decision.verdict, outcome.decision.winner)
+        else {
+            let reason = match outcome.decision.verdict {
+                Verdict::None => {
+                    "no remaining candidate passes the calibrated threshold and its held-out check"
+                }
+                Verdict::Unexplained => "a lack of fit remains that no remaining candidate removes",
+                Verdict::Ambiguous => {
+                    "the best remaining candidates explain the data alike (ambiguous): no single one is added"
+                }
+                Verdict::Effect => "the selection named no candidate",
+            };
+            break stop_of(&outcome, reason);
+        };
+        if outcome.decision.verdict == Verdict::Ambiguous && !ambiguous_first {
+            break stop_of(
+                &outcome,
+                "the best remaining candidates explain the data alike (ambiguous): no single one is added",
+            );
+        }
+        let w = &outcome.screened[wi];
+        let Some(f) = w.fit.clone() else {
+            break stop_of(&outcome, "the named candidate has no refit");
+        };
+        let before = if steps.is_empty() {
+            baseline_gap.clone()
+        } else {
+            gap_of(
+                &format!(
+                    "baseline + {}",
+                    current_model
+                        .included
+                        .iter()
+                        .map(|(c, _)| c.label())
+                        .collect::<Vec<_>>()
+                        .join(" + ")
+                ),
+                &outcome.base,
+                outcome.load.as_ref().map(|lc| (lc, lc.baseline_chi2)),
+            )
+        };
+        let label_after = {
+            let mut names: Vec<String> = current_model
+                .included
+                .iter()
+                .map(|(c, _)| c.label())
+                .collect();
+            names.push(w.label.clone());
+            format!("baseline + {}", names.join(" + "))
+        };
+        let after = gap_of(&label_after, &f, outcome.load.as_ref().zip(w.load_chi2));
+        let named = named_effects(&current_model, &w.candidate, &f);
+        steps.push(ForwardStep {
+            step: steps.len() + 1,
+            effect: w.effect.clone(),
+            label: w.label.clone(),
+            parameters: parameter_map(&w.candidate, f.theta, f.theta_se),
+            refitted: named[..named.len() - 1].to_vec(),
+            delta_chi2: w.delta_chi2.unwrap_or(0.0),
+            threshold_chi2: outcome.threshold.delta_chi2_95,
+            held_out_gain: w.held_out.as_ref().map(selection::HeldOut::gain),
+            held_out_margin: w.held_out.as_ref().map(|h| h.margin_chi2),
+            gap_shrink: before.chi2_per_dof / after.chi2_per_dof.max(1e-300),
+            before,
+            after: after.clone(),
+        });
+        effects = named;
+        // the model of the next step: the included effects at their refitted values, plus
+        // the new one
+        let mut next = current_model.clone();
+        for (j, (_, t)) in next.included.iter_mut().enumerate() {
+            if let Some(v) = f.included.get(j) {
+                *t = *v;
+            }
+        }
+        next.included.push((w.candidate, f.theta));
+        let f_modulus = f.modulus_kpa;
+        if ambiguous_first {
+            final_fit = Some((f, after));
+            break ForwardStop {
+                verdict: Verdict::Ambiguous,
+                reason: format!(
+                    "{} is ambiguous with {}: the search does not continue from a choice the data cannot make",
+                    w.effect,
+                    outcome.decision.group.join(", ")
+                ),
+                best: None,
+                best_delta_chi2: None,
+                threshold_chi2: None,
+            };
+        }
+        current_model = next;
+        final_fit = Some((f, after));
+        if steps.len() >= MAX_EFFECTS {
+            break ForwardStop {
+                verdict: Verdict::Effect,
+                reason: format!("stopped after {MAX_EFFECTS} effects (the maximum)"),
+                best: None,
+                best_delta_chi2: None,
+                threshold_chi2: None,
+            };
+        }
+        // the candidates that combine with every included effect
+        let mut remaining = Vec::new();
+        for c in cands {
+            let clash = current_model
+                .included
+                .iter()
+                .find_map(|(inc, _)| incompatibility(inc.kind, c.kind).map(|r| (inc, r)));
+            match clash {
+                Some((inc, r)) => {
+                    if inc.kind != c.kind
+                        && !not_testable
+                            .iter()
+                            .any(|n| n.effect == c.kind.name() && n.with == inc.kind.name())
+                    {
+                        not_testable.push(NotTestable {
+                            effect: c.kind.name().into(),
+                            with: inc.kind.name().into(),
+                            reason: r.into(),
+                        });
+                    }
+                }
+                None => remaining.push(*c),
+            }
+        }
+        if remaining.is_empty() {
+            break ForwardStop {
+                verdict: Verdict::None,
+                reason: "no remaining candidate combines with the effects found".into(),
+                best: None,
+                best_delta_chi2: None,
+                threshold_chi2: None,
+            };
+        }
+        match step(
+            &current_model,
+            &remaining,
+            points,
+            subset,
+            noise,
+            whitener,
+            f_modulus,
+            options,
+        ) {
+            Some(o) => outcome = o,
+            None => {
+                break ForwardStop {
+                    verdict: Verdict::Unexplained,
+                    reason: "the fit of the model with the effects found did not converge".into(),
+                    best: None,
+                    best_delta_chi2: None,
+                    threshold_chi2: None,
+                };
+            }
+        }
+    };
+    let modulus_after_kpa = final_fit
+        .as_ref()
+        .map_or(first.base.modulus_kpa, |(f, _)| f.modulus_kpa);
+    let final_model = final_fit.map(|(_, g)| g);
+    ForwardSelection {
+        gap_shrink: final_model
+            .as_ref()
+            .map(|g| baseline_gap.chi2_per_dof / g.chi2_per_dof.max(1e-300)),
+        steps,
+        stop,
+        not_testable,
+        effects,
+        final_model,
+        modulus_before_kpa: first.base.modulus_kpa,
+        modulus_after_kpa,
+    }
+}
