@@ -16,7 +16,7 @@
 
 use std::time::{Duration, Instant};
 
-use daemon::api::{Event, ExperimentRequest, Job, JobState};
+use daemon::api::{Event, ExperimentRequest, JobState};
 use daemon::{Client, DaemonHandle};
 use protocol::{FrameDecoder, Request, RequestFrame};
 use system_tests::{start_test_daemon, temp_dir, wait_job};
