@@ -169,6 +169,35 @@ fn auto_run(name: &str, modulus_kpa: f64) -> AutoRun {
         "{}",
         files.body
     );
+    // The probe's own record is served too: its file list and its fit.
+    let probe_files = client
+        .raw(
+            "GET",
+            &format!("/v1/records/{record_name}/probe/"),
+            None,
+            &[],
+            true,
+        )
+        .unwrap();
+    assert!(
+        probe_files.body.contains("fit.json"),
+        "{}",
+        probe_files.body
+    );
+    let probe_fit = client
+        .raw(
+            "GET",
+            &format!("/v1/records/{record_name}/probe/fit.json"),
+            None,
+            &[],
+            true,
+        )
+        .unwrap();
+    let probe_fit: serde_json::Value = serde_json::from_str(&probe_fit.body).unwrap();
+    assert_eq!(
+        probe_fit["modulus_kpa"].as_f64(),
+        Some(choice.probe_modulus_kpa)
+    );
     daemon.shutdown();
     let _ = std::fs::remove_dir_all(&dir);
     AutoRun {
@@ -268,6 +297,60 @@ fn the_automatic_choice_is_validated_per_field_over_http() {
         (PressureSetting::Auto, Some(10.0))
     );
     let _ = client.cancel(job.id);
+    daemon.shutdown();
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// An emergency stop during the probe: the job ends, and the experiment's own record says
+/// so (the probe's metadata with the status `Failed` and a note pointing at `probe/`)
+/// instead of being a folder without status.
+#[test]
+fn a_stop_during_the_probe_leaves_a_record_that_says_so() {
+    let (daemon, client, dir) = bench("daemon-auto-stop", 200.0);
+    let request = ExperimentRequest {
+        pressure_kpa: PressureSetting::Auto,
+        probe_pressure_kpa: None,
+        start_mm: 0.8,
+        depth_mm: 1.2,
+        speed_mm_per_s: 2.0,
+        repeats: 2,
+        stream_rate_hz: 2000,
+        label: "auto, stopped in the probe".into(),
+    };
+    let job = client.submit(&request).unwrap();
+    // wait until the probe is under way, then stop
+    let t0 = Instant::now();
+    loop {
+        let j = client.job(job.id).unwrap();
+        // the probe's indentation is under way (its message "probe at 6 kPa: indentation
+        // 1/1"; progress only moves when an indentation ends)
+        if j.pressure_choice.is_none()
+            && j.message.contains("probe")
+            && j.message.contains("indentation")
+        {
+            break;
+        }
+        assert!(!j.state.is_finished(), "finished before the stop: {j:?}");
+        assert!(t0.elapsed() < Duration::from_secs(60), "no probe: {j:?}");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    client.stop().unwrap();
+    let done = wait_job(&client, job.id, Duration::from_secs(60));
+    assert_ne!(done.state, JobState::Complete, "{done:?}");
+    assert!(done.pressure_choice.is_none(), "{done:?}");
+    let record = dir.join("records").join(done.record.clone().unwrap());
+    let meta = RecordMeta::read(&record).unwrap();
+    assert!(
+        matches!(&meta.status, RecordStatus::Failed(r) if r.contains("automatic pressure choice")),
+        "{:?}",
+        meta.status
+    );
+    assert!(
+        meta.notes.iter().any(|n| n.contains("probe/")),
+        "{:?}",
+        meta.notes
+    );
+    assert!(record.join("probe/meta.json").exists());
     daemon.shutdown();
     let _ = std::fs::remove_dir_all(&dir);
 }

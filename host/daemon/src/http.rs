@@ -244,6 +244,8 @@ pub fn router(app: App) -> Router {
         .route("/v1/records", get(list_records))
         .route("/v1/records/{name}", get(list_record_files))
         .route("/v1/records/{name}/{file}", get(get_record_file))
+        .route("/v1/records/{name}/probe/", get(list_probe_files))
+        .route("/v1/records/{name}/probe/{file}", get(get_probe_file))
         .route("/v1/events", get(events))
         .route("/v1/live", get(super::dashboard::live))
         .route("/v1/login-link", post(login_link))
@@ -534,6 +536,44 @@ async fn get_record_file(
         None => error(
             StatusCode::NOT_FOUND,
             format!("no file {file} in record {name}"),
+        ),
+    }
+}
+
+/// `GET /v1/records/{name}/probe/`: the files of the probe record an automatic pressure
+/// choice keeps inside the experiment's record.
+async fn list_probe_files(State(app): State<App>, Path(name): Path<String>) -> Response {
+    let name = match safe_name(&name) {
+        Ok(n) => n,
+        Err(r) => return error(StatusCode::BAD_REQUEST, r),
+    };
+    let Some(dir) = real_entry(
+        &app.shared.records_dir,
+        &[name, crate::jobs::PROBE_DIR],
+        true,
+    ) else {
+        return error(StatusCode::NOT_FOUND, format!("no probe record in {name}"));
+    };
+    Json(list_dir(&dir, false)).into_response()
+}
+
+async fn get_probe_file(
+    State(app): State<App>,
+    Path((name, file)): Path<(String, String)>,
+) -> Response {
+    let (name, file) = match (safe_name(&name), safe_name(&file)) {
+        (Ok(n), Ok(f)) => (n, f),
+        (Err(r), _) | (_, Err(r)) => return error(StatusCode::BAD_REQUEST, r),
+    };
+    match real_entry(
+        &app.shared.records_dir,
+        &[name, crate::jobs::PROBE_DIR, file],
+        false,
+    ) {
+        Some(path) => send_file(&path).await,
+        None => error(
+            StatusCode::NOT_FOUND,
+            format!("no file {file} in the probe record of {name}"),
         ),
     }
 }

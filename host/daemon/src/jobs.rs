@@ -19,7 +19,7 @@ use super::guarded_transport::StopKind;
 use super::live_radius::LiveRadius;
 use experiment::calibration::{CalibrationRecord, ProximityCalibration};
 use experiment::pipeline::{self, ExperimentReport, RunContext, RunError};
-use experiment::record_meta::RecordStatus;
+use experiment::record_meta::{RecordMeta, RecordStatus};
 use experiment::records::{RecordDir, unix_now_s, utc_stamp};
 use experiment::{ExperimentError, IndentationPlan, RadiusSource};
 use fit::LutModel;
@@ -313,18 +313,21 @@ impl JobRun<'_> {
         let probe_plan = pipeline::probe_plan(plan);
         let probe_share =
             f64::from(probe_plan.repeats) / f64::from(probe_plan.repeats + plan.repeats.max(1));
-        let probe = self.run(
-            link,
-            &applied,
-            &probe_plan,
-            &probe_record,
-            (0.0, probe_share),
-            &format!("probe at {} kPa: ", plan.pressure_kpa),
-        )?;
+        let probe = self
+            .run(
+                link,
+                &applied,
+                &probe_plan,
+                &probe_record,
+                (0.0, probe_share),
+                &format!("probe at {} kPa: ", plan.pressure_kpa),
+            )
+            .inspect_err(|e| self.keep_probe_outcome(&probe_record, e))?;
         *phase = "pressure choice: ";
         let choice = pipeline::choose_pressure(self.model, &cal.record, plan, &probe, |p| {
             EXPERIMENT_PRESSURE_KPA.contains(&p)
-        })?;
+        })
+        .inspect_err(|e| self.keep_probe_outcome(&probe_record, e))?;
         self.record
             .write_json(pipeline::PRESSURE_CHOICE_FILE, &choice)?;
         let summary = choice_summary(&choice, &format!("{record_name}/{PROBE_DIR}"));
@@ -359,6 +362,26 @@ impl JobRun<'_> {
         )?;
         report.notes.push(pipeline::choice_note(&choice));
         Ok(report)
+    }
+}
+
+impl JobRun<'_> {
+    /// The experiment's own record when the automatic choice ends before its measurement
+    /// (the probe stopped or failed, or no pressure could be chosen): its `meta.json` is the
+    /// probe's, with the status `Failed` and a note saying why and where the probe's record
+    /// is, so the record list shows the outcome rather than a record without status. Best
+    /// effort: the job's own error is what the caller reports.
+    fn keep_probe_outcome(&self, probe_record: &RecordDir, error: &RunError) {
+        let Ok(mut meta) = RecordMeta::read(&probe_record.dir) else {
+            return;
+        };
+        meta.status = RecordStatus::Failed(format!("automatic pressure choice: {error}"));
+        meta.notes.push(format!(
+            "the measurement did not run: the probe's record is in {PROBE_DIR}/"
+        ));
+        if let Err(e) = meta.write(self.record) {
+            tracing::warn!("could not write the record's status: {e}");
+        }
     }
 }
 
