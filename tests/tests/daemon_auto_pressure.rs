@@ -154,45 +154,21 @@ fn auto_run(name: &str, modulus_kpa: f64) -> AutoRun {
         stored["candidates"].as_array().map(Vec::len),
         Some(choice.candidates.len())
     );
-    // The file is served like the record's other files.
-    let files = client
-        .raw(
-            "GET",
-            &format!("/v1/records/{record_name}"),
-            None,
-            &[],
-            true,
-        )
-        .unwrap();
+    // The file is served like the record's other files, and the probe's record too.
+    let get = |path: String| client.raw("GET", &path, None, &[], true).unwrap();
+    let files = get(format!("/v1/records/{record_name}"));
     assert!(
         files.body.contains("pressure_choice.json"),
         "{}",
         files.body
     );
-    // The probe's own record is served too: its file list and its fit.
-    let probe_files = client
-        .raw(
-            "GET",
-            &format!("/v1/records/{record_name}/probe/"),
-            None,
-            &[],
-            true,
-        )
-        .unwrap();
+    let probe_files = get(format!("/v1/records/{record_name}/probe/"));
     assert!(
         probe_files.body.contains("fit.json"),
         "{}",
         probe_files.body
     );
-    let probe_fit = client
-        .raw(
-            "GET",
-            &format!("/v1/records/{record_name}/probe/fit.json"),
-            None,
-            &[],
-            true,
-        )
-        .unwrap();
+    let probe_fit = get(format!("/v1/records/{record_name}/probe/fit.json"));
     let probe_fit: serde_json::Value = serde_json::from_str(&probe_fit.body).unwrap();
     assert_eq!(
         probe_fit["modulus_kpa"].as_f64(),

@@ -513,67 +513,61 @@ async fn list_records(State(app): State<App>) -> Response {
 }
 
 async fn list_record_files(State(app): State<App>, Path(name): Path<String>) -> Response {
-    let name = match safe_name(&name) {
-        Ok(n) => n,
-        Err(r) => return error(StatusCode::BAD_REQUEST, r),
-    };
-    let Some(dir) = real_entry(&app.shared.records_dir, &[name], true) else {
-        return error(StatusCode::NOT_FOUND, format!("no record {name}"));
-    };
-    Json(list_dir(&dir, false)).into_response()
+    list_in_record(&app, &name, None)
 }
 
 async fn get_record_file(
     State(app): State<App>,
     Path((name, file)): Path<(String, String)>,
 ) -> Response {
-    let (name, file) = match (safe_name(&name), safe_name(&file)) {
-        (Ok(n), Ok(f)) => (n, f),
-        (Err(r), _) | (_, Err(r)) => return error(StatusCode::BAD_REQUEST, r),
-    };
-    match real_entry(&app.shared.records_dir, &[name, file], false) {
-        Some(path) => send_file(&path).await,
-        None => error(
-            StatusCode::NOT_FOUND,
-            format!("no file {file} in record {name}"),
-        ),
-    }
+    file_in_record(&app, &name, None, &file).await
 }
 
 /// `GET /v1/records/{name}/probe/`: the files of the probe record an automatic pressure
 /// choice keeps inside the experiment's record.
 async fn list_probe_files(State(app): State<App>, Path(name): Path<String>) -> Response {
-    let name = match safe_name(&name) {
-        Ok(n) => n,
-        Err(r) => return error(StatusCode::BAD_REQUEST, r),
-    };
-    let Some(dir) = real_entry(
-        &app.shared.records_dir,
-        &[name, crate::jobs::PROBE_DIR],
-        true,
-    ) else {
-        return error(StatusCode::NOT_FOUND, format!("no probe record in {name}"));
-    };
-    Json(list_dir(&dir, false)).into_response()
+    list_in_record(&app, &name, Some(crate::jobs::PROBE_DIR))
 }
 
 async fn get_probe_file(
     State(app): State<App>,
     Path((name, file)): Path<(String, String)>,
 ) -> Response {
-    let (name, file) = match (safe_name(&name), safe_name(&file)) {
+    file_in_record(&app, &name, Some(crate::jobs::PROBE_DIR), &file).await
+}
+
+/// The files of record `name` (or of its sub-record `sub`), names checked by [`safe_name`].
+fn list_in_record(app: &App, name: &str, sub: Option<&str>) -> Response {
+    let name = match safe_name(name) {
+        Ok(n) => n,
+        Err(r) => return error(StatusCode::BAD_REQUEST, r),
+    };
+    let mut parts = vec![name];
+    parts.extend(sub);
+    let Some(dir) = real_entry(&app.shared.records_dir, &parts, true) else {
+        return error(
+            StatusCode::NOT_FOUND,
+            format!("no record {}", parts.join("/")),
+        );
+    };
+    Json(list_dir(&dir, false)).into_response()
+}
+
+/// One file of record `name` (or of its sub-record `sub`), names checked by [`safe_name`].
+async fn file_in_record(app: &App, name: &str, sub: Option<&str>, file: &str) -> Response {
+    let (name, file) = match (safe_name(name), safe_name(file)) {
         (Ok(n), Ok(f)) => (n, f),
         (Err(r), _) | (_, Err(r)) => return error(StatusCode::BAD_REQUEST, r),
     };
-    match real_entry(
-        &app.shared.records_dir,
-        &[name, crate::jobs::PROBE_DIR, file],
-        false,
-    ) {
+    let mut parts = vec![name];
+    parts.extend(sub);
+    let record = parts.join("/");
+    parts.push(file);
+    match real_entry(&app.shared.records_dir, &parts, false) {
         Some(path) => send_file(&path).await,
         None => error(
             StatusCode::NOT_FOUND,
-            format!("no file {file} in the probe record of {name}"),
+            format!("no file {file} in record {record}"),
         ),
     }
 }
