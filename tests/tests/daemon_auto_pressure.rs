@@ -59,6 +59,20 @@ fn bench(name: &str, modulus_kpa: f64) -> (DaemonHandle, Client, PathBuf) {
     (daemon, client, dir)
 }
 
+/// An automatic-pressure experiment: the default probe, two indentations of 1.2 mm.
+fn auto_request(label: String) -> ExperimentRequest {
+    ExperimentRequest {
+        pressure_kpa: PressureSetting::Auto,
+        probe_pressure_kpa: None,
+        start_mm: 0.8,
+        depth_mm: 1.2,
+        speed_mm_per_s: 2.0,
+        repeats: 2,
+        stream_rate_hz: 2000,
+        label,
+    }
+}
+
 /// What one automatic-pressure job on a sample of `modulus_kpa` gave.
 struct AutoRun {
     chosen_kpa: f64,
@@ -67,16 +81,7 @@ struct AutoRun {
 
 fn auto_run(name: &str, modulus_kpa: f64) -> AutoRun {
     let (daemon, client, dir) = bench(name, modulus_kpa);
-    let request = ExperimentRequest {
-        pressure_kpa: PressureSetting::Auto,
-        probe_pressure_kpa: None,
-        start_mm: 0.8,
-        depth_mm: 1.2,
-        speed_mm_per_s: 2.0,
-        repeats: 2,
-        stream_rate_hz: 2000,
-        label: format!("auto, {modulus_kpa} kPa sample"),
-    };
+    let request = auto_request(format!("auto, {modulus_kpa} kPa sample"));
     let job = client.submit(&request).unwrap();
     assert_eq!(job.experiment.as_ref(), Some(&request));
     let done = wait_job(&client, job.id, Duration::from_secs(120));
@@ -283,16 +288,7 @@ fn the_automatic_choice_is_validated_per_field_over_http() {
 #[test]
 fn a_stop_during_the_probe_leaves_a_record_that_says_so() {
     let (daemon, client, dir) = bench("daemon-auto-stop", 200.0);
-    let request = ExperimentRequest {
-        pressure_kpa: PressureSetting::Auto,
-        probe_pressure_kpa: None,
-        start_mm: 0.8,
-        depth_mm: 1.2,
-        speed_mm_per_s: 2.0,
-        repeats: 2,
-        stream_rate_hz: 2000,
-        label: "auto, stopped in the probe".into(),
-    };
+    let request = auto_request("auto, stopped in the probe".into());
     let job = client.submit(&request).unwrap();
     // wait until the probe is under way, then stop
     let t0 = Instant::now();

@@ -20,6 +20,22 @@ fn tables() -> (fem_core::lut::Lut, Vec<diagnosis::tables::EffectTable>) {
     shipped_tables().expect("diagnosis test setup")
 }
 
+/// The diagnosis as these tests run it: 200 bootstrap replicates, no confidence reruns.
+fn diagnose_seeded(
+    base: &fem_core::lut::Lut,
+    effects: &[diagnosis::tables::EffectTable],
+    points: Vec<diagnosis::data::Point>,
+    seed: u64,
+) -> diagnosis::Diagnosis {
+    let options = DiagnoseOptions {
+        bootstrap: 200,
+        confidence_reruns: 0,
+        seed,
+        ..DiagnoseOptions::default()
+    };
+    diagnose(base, effects, points, &options).expect("diagnosis test setup")
+}
+
 fn check(kind: EffectKind, seed: u64) {
     let (base, effects) = tables();
     let size = sizes(kind)[1];
@@ -30,13 +46,7 @@ fn check(kind: EffectKind, seed: u64) {
         ..SimSpec::default()
     })
     .expect("diagnosis test setup");
-    let options = DiagnoseOptions {
-        bootstrap: 200,
-        confidence_reruns: 0,
-        seed,
-        ..DiagnoseOptions::default()
-    };
-    let d = diagnose(&base, &effects, points, &options).expect("diagnosis test setup");
+    let d = diagnose_seeded(&base, &effects, points, seed);
     let named = d.effect.as_deref() == Some(kind.name())
         || d.ambiguity_group.iter().any(|g| g == kind.name());
     assert!(
@@ -116,13 +126,7 @@ fn check_pair(a: Hidden, b: Hidden, seed: u64) {
         ..SimSpec::default()
     })
     .expect("diagnosis test setup");
-    let options = DiagnoseOptions {
-        bootstrap: 200,
-        confidence_reruns: 0,
-        seed,
-        ..DiagnoseOptions::default()
-    };
-    let d = diagnose(&base, &effects, points, &options).expect("diagnosis test setup");
+    let d = diagnose_seeded(&base, &effects, points, seed);
     let text = diagnosis::report::text(&d);
     eprintln!("{text}");
     let names: Vec<&str> = d.effects.iter().map(|e| e.effect.as_str()).collect();

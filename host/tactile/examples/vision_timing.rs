@@ -7,7 +7,7 @@ use camera::{Frame, PixelFormat, encode_gray_jpeg};
 use std::hint::black_box;
 use std::time::Instant;
 use testkit::{SyntheticDisc, SyntheticScene};
-use vision::{ContactRadiusConfig, ContactRadiusEstimator};
+use vision::{ContactRadiusConfig, ContactRadiusEstimator, GrayImage};
 
 /// Nanoseconds this thread has spent on a CPU.
 fn thread_cpu_ns() -> Option<u64> {
@@ -29,6 +29,27 @@ fn time(label: &str, n: usize, mut f: impl FnMut()) {
     println!("{label:<44} {wall_ms:.3} ms wall, {cpu} per frame");
 }
 
+/// Times the estimator on `scene`'s frame pair (`label` plus the number of fit passes it
+/// takes); returns the estimator and the frame for further timings, `None` if the reference
+/// frame is refused.
+fn time_scene(
+    scene: &SyntheticScene,
+    n: usize,
+    label: &str,
+) -> Option<(ContactRadiusEstimator, GrayImage)> {
+    let (reference, frame) = scene.render_pair(1);
+    let est = ContactRadiusEstimator::new(reference, ContactRadiusConfig::default()).ok()?;
+    let passes = est
+        .measure(&frame)
+        .ok()
+        .and_then(|m| m.disc)
+        .map_or(0, |d| d.passes);
+    time(&format!("{label} ({passes} passes)"), n, || {
+        black_box(est.measure(black_box(&frame)).ok());
+    });
+    Some((est, frame))
+}
+
 fn main() {
     let n: usize = std::env::args()
         .nth(1)
@@ -44,22 +65,13 @@ fn main() {
             [321.3, 238.6]
         };
         scene.disc = Some(SyntheticDisc::circle(center, radius));
-        let (reference, frame) = scene.render_pair(1);
-        let Ok(est) = ContactRadiusEstimator::new(reference, ContactRadiusConfig::default()) else {
+        let Some((est, frame)) = time_scene(
+            &scene,
+            n,
+            &format!("contact radius 640x480, r = {radius} px"),
+        ) else {
             return;
         };
-        let passes = est
-            .measure(&frame)
-            .ok()
-            .and_then(|m| m.disc)
-            .map_or(0, |d| d.passes);
-        time(
-            &format!("contact radius 640x480, r = {radius} px ({passes} passes)"),
-            n,
-            || {
-                black_box(est.measure(black_box(&frame)).ok());
-            },
-        );
         if radius == 100.0 {
             let jpeg = Frame {
                 format: PixelFormat::Mjpeg,
@@ -89,21 +101,14 @@ fn main() {
             semi_minor_px: radius * 0.94f64.sqrt(),
             angle_rad: 0.4,
         });
-        let (reference, frame) = scene.render_pair(1);
-        let Ok(est) = ContactRadiusEstimator::new(reference, ContactRadiusConfig::default()) else {
-            return;
-        };
-        let passes = est
-            .measure(&frame)
-            .ok()
-            .and_then(|m| m.disc)
-            .map_or(0, |d| d.passes);
-        time(
-            &format!("contact radius, r = {radius} px tilted 20 deg ({passes} passes)"),
+        if time_scene(
+            &scene,
             n,
-            || {
-                black_box(est.measure(black_box(&frame)).ok());
-            },
-        );
+            &format!("contact radius, r = {radius} px tilted 20 deg"),
+        )
+        .is_none()
+        {
+            return;
+        }
     }
 }
