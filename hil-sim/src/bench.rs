@@ -63,6 +63,7 @@ pub trait BenchDevice: Send + std::fmt::Debug {
     fn record_truth(&mut self);
     fn take_truth(&mut self) -> Vec<TruthSample>;
     fn set_camera_enabled(&mut self, enabled: bool);
+    fn set_camera_deadline(&mut self, earliest_s: Option<f64>);
     fn stats(&self) -> SimStats;
     /// A freshly powered device of the same kind (the cable plugged back in).
     fn power_cycle(&self) -> Result<Box<dyn BenchDevice>, SimError>;
@@ -102,6 +103,9 @@ impl BenchDevice for SimDevice {
     fn set_camera_enabled(&mut self, enabled: bool) {
         SimDevice::set_camera_enabled(self, enabled);
     }
+    fn set_camera_deadline(&mut self, earliest_s: Option<f64>) {
+        SimDevice::set_camera_deadline(self, earliest_s);
+    }
     fn stats(&self) -> SimStats {
         SimDevice::stats(self)
     }
@@ -138,6 +142,9 @@ impl BenchDevice for FirmwareDevice {
     fn set_camera_enabled(&mut self, enabled: bool) {
         FirmwareDevice::set_camera_enabled(self, enabled);
     }
+    fn set_camera_deadline(&mut self, earliest_s: Option<f64>) {
+        FirmwareDevice::set_camera_deadline(self, earliest_s);
+    }
     fn stats(&self) -> SimStats {
         FirmwareDevice::stats(self)
     }
@@ -165,6 +172,11 @@ pub struct BenchOptions {
     pub frame_queue: usize,
     /// Render camera frames at all.
     pub camera: bool,
+    /// In real time: frames due more than this long before the wall clock are skipped
+    /// instead of rendered late (`None`: every frame is rendered, however late). For
+    /// frames published to a video device, whose reader stamps them when they arrive;
+    /// in-process frames carry their simulated capture time and need no bound.
+    pub camera_max_lag_s: Option<f64>,
 }
 
 impl Default for BenchOptions {
@@ -173,6 +185,7 @@ impl Default for BenchOptions {
             pacing: Pacing::Auto,
             frame_queue: 8,
             camera: true,
+            camera_max_lag_s: None,
         }
     }
 }
@@ -510,6 +523,7 @@ fn add_stats(total: &mut SimStats, s: SimStats) {
     total.ticks += s.ticks;
     total.frames_rendered += s.frames_rendered;
     total.frames_dropped += s.frames_dropped;
+    total.frames_late += s.frames_late;
     total.bytes_to_host += s.bytes_to_host;
     total.bytes_dropped += s.bytes_dropped;
     total.bytes_corrupted += s.bytes_corrupted;
@@ -621,6 +635,9 @@ fn serve(
             let wall = anchor_sim_s + anchor.elapsed().as_secs_f64();
             let mut ticks = 0;
             let max_ticks = if device.may_lag_wall_clock() { 4 } else { 200 };
+            if let Some(max_lag) = options.camera_max_lag_s {
+                device.set_camera_deadline(Some(wall - max_lag));
+            }
             while device.next_tick_s() <= wall && ticks < max_ticks {
                 device.step();
                 ticks += 1;

@@ -1,7 +1,7 @@
 //! Publishing the rendered frames on a V4L2 video *output* device, so that a host reads them
 //! through a real kernel capture driver: vivid's output -> capture loop (the test driver of
 //! the kernel, as in the kernel-driver test tier) or a v4l2loopback device (on a user's
-//! machine). The frames are queued in memory-mapped buffers ([`crate::v4l2_mmap_out`]) in
+//! machine). The frames are queued in memory-mapped buffers (the `v4l2-mmap` crate) in
 //! the scenario's pixel format (GREY or YUYV) and size; a driver that cannot take exactly that format is an error naming what it
 //! offered instead, since a silently converted frame would change the measured radii.
 
@@ -11,7 +11,7 @@ use linuxvideo::format::{PixFormat, PixelFormat as V4l2PixelFormat};
 
 use crate::camera::PixelFormat;
 use crate::device::SimFrame;
-use crate::v4l2_mmap_out::MmapOutput;
+use v4l2_mmap::MmapOutput;
 
 /// Driver buffers: the fewest that keep an output queue streaming; every further buffer
 /// delays a frame by one output period (the host stamps frames when it dequeues them).

@@ -106,6 +106,9 @@ pub struct SimStats {
     pub ticks: u64,
     pub frames_rendered: u64,
     pub frames_dropped: u64,
+    /// Frames not rendered because the simulation was behind the wall clock by more than
+    /// the bench allows (see [`SimDevice::set_camera_deadline`]).
+    pub frames_late: u64,
     pub bytes_to_host: u64,
     pub bytes_dropped: u64,
     pub bytes_corrupted: u64,
@@ -125,6 +128,8 @@ pub struct SimDevice {
     effect_state: EffectState,
     camera: CameraRenderer,
     camera_enabled: bool,
+    /// Frames due before this simulated time are skipped (see `set_camera_deadline`).
+    camera_deadline_s: Option<f64>,
     rng_proximity: SimRng,
     rng_manometer: SimRng,
     rng_load: SimRng,
@@ -218,6 +223,7 @@ impl SimDevice {
             effect_state: EffectState::default(),
             camera,
             camera_enabled: true,
+            camera_deadline_s: None,
             rng_proximity: SimRng::stream(seed, "proximity"),
             rng_manometer: SimRng::stream(seed, "manometer"),
             rng_load: SimRng::stream(seed, "load cell"),
@@ -282,6 +288,14 @@ impl SimDevice {
     /// Turns frame rendering on or off (off saves the time when nobody looks).
     pub fn set_camera_enabled(&mut self, enabled: bool) {
         self.camera_enabled = enabled;
+    }
+
+    /// Frames due before `earliest_s` (simulated time) are not rendered, and counted in
+    /// [`SimStats::frames_late`]. A bench that runs behind the wall clock sets it: a real
+    /// camera delivers a frame on time or not at all, and a frame rendered late and
+    /// published to a video device would be stamped late by whoever captures it.
+    pub fn set_camera_deadline(&mut self, earliest_s: Option<f64>) {
+        self.camera_deadline_s = earliest_s;
     }
 
     /// Starts recording one [`TruthSample`] per tick.
@@ -539,6 +553,10 @@ impl SimDevice {
             let seq = self.frame_index;
             self.frame_index += 1;
             if t_f <= t_prev || !self.camera_enabled {
+                continue;
+            }
+            if self.camera_deadline_s.is_some_and(|d| t_f < d) {
+                self.stats.frames_late += 1;
                 continue;
             }
             if self

@@ -597,6 +597,11 @@ impl FirmwareDevice {
         self.sim.set_camera_enabled(enabled);
     }
 
+    /// See [`SimDevice::set_camera_deadline`].
+    pub fn set_camera_deadline(&mut self, earliest_s: Option<f64>) {
+        self.sim.set_camera_deadline(earliest_s);
+    }
+
     pub fn stats(&self) -> SimStats {
         SimStats {
             bytes_to_host: self.stats_bytes_to_host,

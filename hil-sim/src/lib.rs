@@ -31,4 +31,3 @@ pub use pneumatic_plant as pneumatics;
 pub mod rng;
 pub mod scenario;
 pub mod sensors;
-pub mod v4l2_mmap_out;

@@ -208,3 +208,39 @@ fn a_scenario_is_bit_for_bit_reproducible_from_its_seed() {
     assert_eq!(s1, s2);
     assert_ne!(b1, b3);
 }
+
+/// A bench behind the wall clock skips the frames that are already late instead of
+/// rendering them, counts them, and renders every frame again once it has caught up.
+#[test]
+fn frames_behind_the_camera_deadline_are_skipped_and_counted() {
+    let mut dev = SimDevice::new(scenario("")).unwrap();
+    let fps = dev.scenario().camera.fps;
+    // Half a second of frames that are all late (the deadline is ahead of them).
+    dev.set_camera_deadline(Some(0.5));
+    while dev.time_s() < 0.5 {
+        dev.step();
+    }
+    let late = dev.take_frames();
+    let stats = dev.stats();
+    assert!(late.is_empty(), "{} late frames rendered", late.len());
+    // 0.5 s at the scenario's frame rate, give or take the frame phase
+    let expected = 0.5 * fps;
+    assert!(
+        (stats.frames_late as f64 - expected).abs() <= 1.0,
+        "{} frames counted late, expected about {expected}",
+        stats.frames_late
+    );
+    // Caught up: the next half second renders every frame.
+    dev.set_camera_deadline(Some(0.5));
+    while dev.time_s() < 1.0 {
+        dev.step();
+    }
+    let on_time = dev.take_frames();
+    assert!(
+        (on_time.len() as f64 - 0.5 * fps).abs() <= 1.0,
+        "{}",
+        on_time.len()
+    );
+    assert!(on_time.iter().all(|f| f.timestamp_us >= 500_000));
+    assert_eq!(dev.stats().frames_late, stats.frames_late);
+}

@@ -106,6 +106,21 @@ fn calibrate_then_measure_against_the_pty_bench() {
     assert_eq!(meta.plan, plan);
     let frames = meta.frames.unwrap();
     assert_eq!(frames.measured, report.frames as u64);
+    // The simulated camera stamps its frames on the device's clock at their exposure, so
+    // the branches of a(u_s) imply no camera latency: what remains is the noise of the
+    // estimate and the bench's own small hysteresis (the pressure controller working
+    // against the volume change in and out).
+    let timing = &report.camera_timing;
+    eprintln!("camera timing {timing:?}");
+    assert_eq!(timing.latency_applied_s, 0.0);
+    let residual = timing.residual_latency_s.unwrap();
+    assert!(residual.abs() < 0.005, "{timing:?}");
+    // The record alone gives the same estimate (`tactile calibrate camera-latency`).
+    let from_record = experiment::camera_latency::estimate_from_record(&out.dir).unwrap();
+    assert!(
+        (from_record.total_s() - residual).abs() < 1e-4,
+        "{from_record:?}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -196,6 +196,7 @@ fn main() -> ExitCode {
         let options = BenchOptions {
             pacing: camera_pacing(&args),
             camera: args.camera,
+            camera_max_lag_s: camera_max_lag(&args, device.plant().scenario()),
             ..BenchOptions::default()
         };
         let camera_out =
@@ -250,6 +251,7 @@ fn main() -> ExitCode {
     let options = BenchOptions {
         pacing: camera_pacing(&args),
         camera: args.camera,
+        camera_max_lag_s: camera_max_lag(&args, &scenario),
         ..BenchOptions::default()
     };
     let camera_out = match open_camera_out(args.camera_out.as_deref(), &scenario) {
@@ -346,6 +348,15 @@ fn camera_pacing(args: &Args) -> Pacing {
     } else {
         args.pacing
     }
+}
+
+/// Frames published with `--camera-out` are stamped by their reader when they arrive, so
+/// a frame rendered while the simulation catches up with the wall clock would carry a
+/// late time: such frames are skipped once they are a frame period late, as a camera
+/// that cannot keep up drops frames rather than delivering them late.
+fn camera_max_lag(args: &Args, scenario: &Scenario) -> Option<f64> {
+    let fps = scenario.camera.fps;
+    (args.camera_out.is_some() && fps > 0.0).then(|| 1.0 / fps)
 }
 
 /// Opens `--camera-out` in the scenario camera's format and size.

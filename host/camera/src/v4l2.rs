@@ -7,21 +7,31 @@
 //!   actually chose is read back and mapped ([`pixel_format_from_fourcc`]); a driver that
 //!   silently substitutes YUYV for MJPEG is handled, one we cannot decode is an error naming
 //!   its FourCC. If the driver rejects the request outright, MJPG, YUYV and GREY are tried.
-//! - Memory-mapped streaming (`linuxvideo::stream::ReadStream`, MMAP buffers).
+//! - Memory-mapped streaming ([`v4l2_mmap::MmapCapture`], [`CAPTURE_BUFFERS`] buffers).
 //! - Exposure and white balance are switched to manual where the camera offers the
 //!   controls, so the contact contrast does not drift with auto-exposure.
-//! - Timestamps: `linuxvideo` 0.3.5 does not expose the buffers' driver timestamp or
-//!   sequence field, so frames are stamped with the host clock when dequeued and numbered
-//!   by this source. [`host_clock::monotonic_to_host_us`] is the mapping to use once
-//!   the driver's `CLOCK_MONOTONIC` timestamps are reachable.
+//! - Timestamps: a frame carries the driver's `CLOCK_MONOTONIC` timestamp mapped to the
+//!   host clock (uvcvideo stamps a frame when its first packet arrives, or from the
+//!   camera's own clock), not the time this program dequeued it: a measurement that falls
+//!   behind the camera reads frames late, but their times stay right. A driver that stamps
+//!   on another clock, or a timestamp outside [`PLAUSIBLE_AGE_US`] of now, falls back to
+//!   the dequeue time. Frames are numbered by the driver's sequence counter, so the
+//!   frames it dropped show as gaps.
 
 use super::frame::{Frame, PixelFormat};
 
 use super::source::{CameraError, FrameSource};
 use linuxvideo::controls::Cid;
 use linuxvideo::format::PixFormat;
-use linuxvideo::stream::ReadStream;
 use std::path::{Path, PathBuf};
+use v4l2_mmap::{FrameInfo, MmapCapture};
+
+/// Driver buffers of a capture stream: enough that a frame measured slowly does not make
+/// the driver drop the next ones, few enough that the newest frame is never far behind.
+pub const CAPTURE_BUFFERS: u32 = 4;
+
+/// A driver timestamp older than this (or later than now) is not believed.
+pub const PLAUSIBLE_AGE_US: u64 = 10_000_000;
 
 /// V4L2 `V4L2_EXPOSURE_MANUAL` value of the `EXPOSURE_AUTO` menu control.
 const V4L2_EXPOSURE_MANUAL: i32 = 1;
@@ -98,15 +108,44 @@ pub fn strip_stride(data: &[u8], row_bytes: usize, stride: usize, rows: usize) -
     Some(out)
 }
 
+/// The 64-bit frame number of the driver's 32-bit `sequence`, given the previous frame's.
+pub fn unwrap_sequence(previous: Option<u64>, driver: u32) -> u64 {
+    let Some(prev) = previous else {
+        return u64::from(driver);
+    };
+    let mut n = (prev & !0xffff_ffff) | u64::from(driver);
+    if n < prev {
+        n += 1 << 32;
+    }
+    n
+}
+
+/// The host time of a frame: the driver's monotonic timestamp mapped to the host clock
+/// (given both clocks' readings now), or `host_now_us` if the driver gave none or one that
+/// cannot be right (later than now, or older than [`PLAUSIBLE_AGE_US`]).
+pub fn frame_host_time_us(info: &FrameInfo, monotonic_now_us: i128, host_now_us: u64) -> u64 {
+    match info.monotonic_us {
+        Some(t)
+            if t <= monotonic_now_us && monotonic_now_us - t <= i128::from(PLAUSIBLE_AGE_US) =>
+        {
+            host_clock::map_clock_us(t, monotonic_now_us, host_now_us)
+        }
+        _ => host_now_us,
+    }
+}
+
 /// A streaming V4L2 camera.
 pub struct V4l2Source {
-    stream: ReadStream,
+    stream: MmapCapture,
+    /// The device the stream's buffers belong to (kept open while streaming).
+    _device: linuxvideo::VideoCaptureDevice,
     path: PathBuf,
     format: PixelFormat,
     width: u32,
     height: u32,
     stride: u32,
-    sequence: u64,
+    /// The driver's 32-bit sequence counter, unwrapped.
+    sequence: Option<u64>,
     /// Controls that were switched to manual.
     pub locked_controls: Vec<String>,
 }
@@ -191,17 +230,17 @@ impl V4l2Source {
                     fourcc_str(fourcc)
                 ))
             })?;
-            let stream = capture
-                .into_stream()
+            let stream = MmapCapture::start(&capture, CAPTURE_BUFFERS)
                 .map_err(|e| dev_err(format!("cannot start mmap streaming: {e}")))?;
             return Ok(Self {
                 stream,
+                _device: capture,
                 path: path.to_path_buf(),
                 format,
                 width,
                 height,
                 stride,
-                sequence: 0,
+                sequence: None,
                 locked_controls: locked,
             });
         }
@@ -245,37 +284,43 @@ impl FrameSource for V4l2Source {
     fn next_frame(&mut self) -> Result<Option<Frame>, CameraError> {
         let (format, w, h, stride) = (self.format, self.width, self.height, self.stride);
         let device = self.path.display().to_string();
-        let data = self
+        let (data, info) = self
             .stream
-            .dequeue(|view| {
-                if view.is_error() {
+            .next(|bytes, info| {
+                if info.error {
                     return Err(std::io::Error::other(
                         "driver flagged the buffer as corrupt",
                     ));
                 }
-                let bytes: &[u8] = &view;
                 let bpp = match format {
                     PixelFormat::Yuyv => 2,
                     PixelFormat::Gray8 => 1,
-                    PixelFormat::Mjpeg => return Ok(bytes.to_vec()),
+                    PixelFormat::Mjpeg => return Ok((bytes.to_vec(), info)),
                 };
                 let row = w as usize * bpp;
                 strip_stride(bytes, row, (stride as usize).max(row), h as usize)
+                    .map(|d| (d, info))
                     .ok_or_else(|| std::io::Error::other("buffer shorter than the negotiated size"))
             })
+            .and_then(|r| r)
             .map_err(|e| CameraError::Device {
                 device,
                 message: format!("dequeue: {e}"),
             })?;
+        let sequence = unwrap_sequence(self.sequence, info.sequence);
+        self.sequence = Some(sequence);
         let frame = Frame {
             format,
             width: w,
             height: h,
-            sequence: self.sequence,
-            host_time_us: host_clock::now_us(),
+            sequence,
+            host_time_us: frame_host_time_us(
+                &info,
+                v4l2_mmap::monotonic_now_us(),
+                host_clock::now_us(),
+            ),
             data,
         };
-        self.sequence += 1;
         Ok(Some(frame))
     }
 

@@ -311,3 +311,48 @@ fn driver_monotonic_timestamps_map_to_host_time() {
     // Before the host epoch saturates at 0 rather than wrapping.
     assert_eq!(map_clock_us(0, 10_000_000, 1_000), 0);
 }
+
+/// The driver's 32-bit frame counter becomes a 64-bit one across its wrap, so the frames
+/// the driver dropped are counted right on a long run too.
+#[test]
+fn driver_sequence_unwraps_across_32_bits() {
+    use camera::v4l2::unwrap_sequence;
+    assert_eq!(unwrap_sequence(None, 7), 7);
+    assert_eq!(unwrap_sequence(Some(7), 9), 9);
+    assert_eq!(unwrap_sequence(Some(0xffff_fffe), 1), 0x1_0000_0001);
+    assert_eq!(unwrap_sequence(Some(0x1_0000_0001), 3), 0x1_0000_0003);
+}
+
+/// A frame's host time is the driver's monotonic timestamp moved onto the host clock by
+/// the offset between the two clocks now, not the time the frame was dequeued; timestamps
+/// on another clock, in the future or implausibly old fall back to the dequeue time.
+#[test]
+fn frames_carry_the_drivers_timestamp_on_the_host_clock() {
+    use camera::v4l2::{PLAUSIBLE_AGE_US, frame_host_time_us};
+    use v4l2_mmap::FrameInfo;
+    let info = |t: Option<i128>| FrameInfo {
+        sequence: 0,
+        monotonic_us: t,
+        error: false,
+    };
+    // monotonic now 5 000 000 us, host now 1 000 000 us: host = t - 4 000 000
+    let (mono_now, host_now) = (5_000_000i128, 1_000_000u64);
+    // captured 120 ms before it was dequeued
+    assert_eq!(
+        frame_host_time_us(&info(Some(4_880_000)), mono_now, host_now),
+        880_000
+    );
+    assert_eq!(
+        frame_host_time_us(&info(None), mono_now, host_now),
+        host_now
+    );
+    assert_eq!(
+        frame_host_time_us(&info(Some(5_000_001)), mono_now, host_now),
+        host_now
+    );
+    let too_old = mono_now - i128::from(PLAUSIBLE_AGE_US) - 1;
+    assert_eq!(
+        frame_host_time_us(&info(Some(too_old)), mono_now, host_now),
+        host_now
+    );
+}

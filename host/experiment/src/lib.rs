@@ -13,6 +13,7 @@
 
 pub mod analysis;
 pub mod calibration;
+pub mod camera_latency;
 pub mod camera_radius;
 pub mod indentation;
 pub mod pairing;

@@ -64,10 +64,58 @@ pub struct ExperimentReport {
     pub frames_unmeasured: u64,
     pub frames_dropped: u64,
     pub link: LinkStats,
+    /// The camera's latency applied to the frames and what the curve's two branches
+    /// still imply (see [`crate::camera_latency`]).
+    pub camera_timing: CameraTiming,
     pub notes: Vec<String>,
     /// The points the fit used (for a caller that plots or publishes them).
     #[serde(skip)]
     pub fit_points: Vec<FitPoint>,
+}
+
+/// The camera timing of a measurement.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct CameraTiming {
+    /// The calibration's latency, subtracted from host-stamped frame times (s).
+    pub latency_applied_s: f64,
+    /// The latency the loading and unloading branches still imply after that (s; `None`
+    /// with the reason if it could not be estimated). On an elastic sample it should be
+    /// near zero; on a viscoelastic one it includes the sample's own hysteresis.
+    pub residual_latency_s: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub residual_not_estimated: Option<String>,
+}
+
+/// Residual latency above which a measurement notes that the camera timing looks wrong.
+pub const RESIDUAL_LATENCY_NOTE_S: f64 = 0.02;
+
+/// The camera timing of a run's paired points.
+pub fn camera_timing(
+    latency_applied_s: f64,
+    points: &[(u32, crate::pairing::PairedPoint)],
+) -> CameraTiming {
+    let curve: Vec<crate::camera_latency::CurvePoint> = points
+        .iter()
+        .map(|(cycle, p)| crate::camera_latency::CurvePoint {
+            cycle: *cycle,
+            t_s: p.t_s,
+            u_s_mm: p.u_s_mm,
+            a_mm: p.a_mm,
+            phase: p.phase,
+        })
+        .collect();
+    match crate::camera_latency::estimate_camera_latency(&curve) {
+        Ok(e) => CameraTiming {
+            latency_applied_s,
+            residual_latency_s: Some(e.latency_s),
+            residual_not_estimated: None,
+        },
+        Err(e) => CameraTiming {
+            latency_applied_s,
+            residual_latency_s: None,
+            residual_not_estimated: Some(e.to_string()),
+        },
+    }
 }
 
 /// The camera scale stored in a calibration record.
@@ -170,16 +218,10 @@ pub fn run_experiment<'a>(
     })?;
     move_stage_to(link, plan.start_mm, plan.speed_mm_per_s.max(1.0))?;
     link.receive_for(context.settle)?;
-    let mut radius = make_radius(link, px).map_err(RunError::Camera)?;
-    let run = run_indentation(
-        link,
-        radius.as_mut(),
-        plan,
-        &proximity,
-        zero,
-        record,
-        progress,
-    );
+    let radius = make_radius(link, px).map_err(RunError::Camera)?;
+    let latency_s = calibration.camera_latency_s.unwrap_or(0.0);
+    let mut radius = crate::camera_latency::LatencyCorrected::new(radius, latency_s);
+    let run = run_indentation(link, &mut radius, plan, &proximity, zero, record, progress);
     let stats = link.stats();
     let (unmeasured, dropped) = radius.failures();
     drop(radius);
@@ -197,6 +239,20 @@ pub fn run_experiment<'a>(
             return Err(e.into());
         }
     };
+    let timing = camera_timing(latency_s, &result.points);
+    if let Some(r) = timing.residual_latency_s
+        && r.abs() > RESIDUAL_LATENCY_NOTE_S
+    {
+        meta.notes.push(format!(
+            "the loading and unloading branches are offset as by a camera latency of {:.0} ms \
+             (after the calibrated {:.0} ms): on an elastic sample, calibrate it with \
+             `tactile calibrate camera-latency --record {}`; on a viscoelastic one this is \
+             the sample's hysteresis",
+            1000.0 * r,
+            1000.0 * latency_s,
+            record.dir.display()
+        ));
+    }
     meta.frames = Some(FrameCounts {
         measured: result.frames as u64,
         unmeasured,
@@ -228,6 +284,7 @@ pub fn run_experiment<'a>(
         frames_unmeasured: unmeasured,
         frames_dropped: dropped,
         link: stats,
+        camera_timing: timing,
         fit,
         notes: meta.notes.clone(),
     })

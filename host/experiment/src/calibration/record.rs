@@ -37,6 +37,10 @@ pub struct CalibrationRecord {
     /// Edge offset of the camera scale (r_px = px_per_mm r_mm + offset), when fitted.
     #[serde(default)]
     pub px_offset_px: Option<f64>,
+    /// How late the camera's frames are stamped after their exposure (s), subtracted
+    /// from their host times before pairing (`tactile calibrate camera-latency`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub camera_latency_s: Option<f64>,
 }
 
 impl CalibrationRecord {
@@ -56,6 +60,7 @@ impl CalibrationRecord {
             proximity_sweeps: Vec::new(),
             px_per_mm_sigma: None,
             px_offset_px: None,
+            camera_latency_s: None,
         }
     }
 

@@ -65,6 +65,15 @@ pub enum What {
         #[arg(long)]
         u_s_equals_h: bool,
     },
+    /// The camera's latency (how late its frames are stamped) from a measurement record
+    /// of an elastic sample: the loading and unloading branches of a(u_s) must coincide,
+    /// and frames stamped late pull them apart. Later measurements subtract it.
+    CameraLatency {
+        /// A record of `tactile measure` (or the daemon) on an elastic sample, with full
+        /// indentations at the same speed in and out.
+        #[arg(long)]
+        record: PathBuf,
+    },
     /// Camera px/mm from frames of a reference disc of known radius.
     Camera {
         /// No-contact reference frame (PNG or PGM).
@@ -204,6 +213,29 @@ fn calibrate(args: &CalibrateArgs) -> Result<(CalibrationRecord, Vec<String>), (
                 ));
                 r.set_proximity(&fit);
             }
+            r
+        }
+        What::CameraLatency { record } => {
+            let mut r = base_record(&args.dir, None);
+            let est = experiment::camera_latency::estimate_from_record(record)
+                .map_err(|e| (e.to_string(), 2u8))?;
+            let total = est.total_s();
+            r.camera_latency_s = Some(total);
+            lines.push(format!(
+                "camera latency: {:.1} ms ({:.1} ms applied when {} was measured, {:+.1} ms from \
+                 its branches, {} µm apart; per indentation: {})",
+                1000.0 * total,
+                1000.0 * est.applied_s,
+                record.display(),
+                1000.0 * est.residual.latency_s,
+                est.residual.branch_offset_um.round(),
+                est.residual
+                    .per_cycle_s
+                    .iter()
+                    .map(|t| format!("{:.1} ms", 1000.0 * (t + est.applied_s)))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ));
             r
         }
         What::Camera { reference, discs } => {
