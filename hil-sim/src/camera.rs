@@ -407,3 +407,42 @@ mod tests {
         );
     }
 }
+
+/// The camera calibration's target: a flat disc of known radius pressed against the shell
+/// (radius 0: no disc, the no-contact reference frame), as the scenario's camera sees it:
+/// the disc's physical radius times the optics' true scale, with the camera's own noise,
+/// vignetting and apex mirror.
+#[derive(Debug)]
+pub struct ReferenceDisc {
+    renderer: CameraRenderer,
+    scene: FrameScene,
+    rng: SimRng,
+}
+
+impl ReferenceDisc {
+    pub fn new(camera: &CameraConfig, radius_mm: f64, seed: u64) -> Self {
+        Self {
+            renderer: CameraRenderer::new(camera.clone()),
+            scene: FrameScene::circle(radius_mm * camera.px_per_mm),
+            rng: SimRng::new(seed ^ 0xD15C),
+        }
+    }
+
+    /// The disc's radius in the image (px).
+    pub fn radius_px(&self) -> f64 {
+        self.scene.radius_px
+    }
+
+    /// One GRAY8 frame (new noise every call).
+    pub fn gray_frame(&mut self) -> Vec<u8> {
+        let mut out = Vec::new();
+        self.renderer
+            .render_gray(&self.scene, &mut self.rng, &mut out);
+        out
+    }
+
+    /// One frame in the camera's format.
+    pub fn frame(&mut self) -> Vec<u8> {
+        self.renderer.render(&self.scene, &mut self.rng)
+    }
+}

@@ -40,10 +40,12 @@ struct Args {
     serve_tty: Option<PathBuf>,
     camera_out: Option<PathBuf>,
     camera_truth: Option<PathBuf>,
+    show_disc_mm: Option<f64>,
+    frame_pgm: Option<PathBuf>,
     help: bool,
 }
 
-const USAGE: &str = "usage: hil-sim [--scenario FILE] [--seed N] [--pacing auto|realtime|fast] [--no-camera] [--run] [--save-curves DIR] [--firmware FILE.elf [--unique-id HEX16]] [--serve-tty PATH] [--camera-out /dev/videoN [--camera-truth FILE]]
+const USAGE: &str = "usage: hil-sim [--scenario FILE] [--seed N] [--pacing auto|realtime|fast] [--no-camera] [--run] [--save-curves DIR] [--firmware FILE.elf [--unique-id HEX16]] [--serve-tty PATH] [--camera-out /dev/videoN [--camera-truth FILE]] [--show-disc MM (--camera-out DEV | --frame-pgm FILE)]
 
 Serves the simulated bench on a pseudo-terminal (its path is printed) until killed.
   --scenario FILE   scenario TOML (default: the built-in gelatin sample on the shipped table)
@@ -62,6 +64,11 @@ Serves the simulated bench on a pseudo-terminal (its path is printed) until kill
                     output -> capture loop, v4l2loopback) in the scenario's format and size
   --camera-truth FILE  with --camera-out: one line per new frame published, `seq,time_us,
                     radius_px` (the contact radius it was rendered with: ground truth)
+  --show-disc MM    instead of the bench, the camera calibration's reference disc of MM mm
+                    radius (0: no disc, the reference frame) in front of the scenario's
+                    camera: published on --camera-out at the camera's frame rate until
+                    killed, or written once to --frame-pgm FILE; for `tactile calibrate
+                    camera --reference R.pgm --disc D.pgm:MM`
   -h, --help        this text";
 
 fn parse_args() -> Result<Args, String> {
@@ -77,6 +84,8 @@ fn parse_args() -> Result<Args, String> {
         serve_tty: None,
         camera_out: None,
         camera_truth: None,
+        show_disc_mm: None,
+        frame_pgm: None,
         help: false,
     };
     let mut it = std::env::args().skip(1);
@@ -129,6 +138,19 @@ fn parse_args() -> Result<Args, String> {
             "--camera-truth" => {
                 args.camera_truth = Some(it.next().ok_or("--camera-truth needs a file")?.into());
             }
+            "--show-disc" => {
+                let v = it.next().ok_or("--show-disc needs a radius in mm")?;
+                let r: f64 = v
+                    .parse()
+                    .map_err(|_| format!("--show-disc: `{v}` is not a number"))?;
+                if !(r.is_finite() && r >= 0.0) {
+                    return Err(format!("--show-disc: {r} mm is not a disc radius"));
+                }
+                args.show_disc_mm = Some(r);
+            }
+            "--frame-pgm" => {
+                args.frame_pgm = Some(it.next().ok_or("--frame-pgm needs a file")?.into());
+            }
             "-h" | "--help" => args.help = true,
             other => return Err(format!("unknown argument `{other}` (try --help)")),
         }
@@ -174,6 +196,13 @@ fn main() -> ExitCode {
     }
     if let Some(dir) = &args.save_curves {
         return save_curves(&scenario, dir);
+    }
+    if let Some(radius_mm) = args.show_disc_mm {
+        return show_disc(&args, &scenario, radius_mm);
+    }
+    if args.frame_pgm.is_some() {
+        eprintln!("hil-sim: --frame-pgm needs --show-disc");
+        return ExitCode::from(2);
     }
     if let Some(elf) = &args.firmware {
         let mut config = EmulatorConfig::new(elf);
@@ -357,6 +386,75 @@ fn camera_pacing(args: &Args) -> Pacing {
 fn camera_max_lag(args: &Args, scenario: &Scenario) -> Option<f64> {
     let fps = scenario.camera.fps;
     (args.camera_out.is_some() && fps > 0.0).then(|| 1.0 / fps)
+}
+
+/// `--show-disc`: the reference disc's frames, to a file or a video device.
+fn show_disc(args: &Args, scenario: &Scenario, radius_mm: f64) -> ExitCode {
+    use hil_sim::camera::ReferenceDisc;
+    let mut disc = ReferenceDisc::new(&scenario.camera, radius_mm, scenario.seed);
+    if let Some(path) = &args.frame_pgm {
+        let frame = disc.gray_frame();
+        let (w, h) = (scenario.camera.width, scenario.camera.height);
+        let mut pgm = format!("P5\n{w} {h}\n255\n").into_bytes();
+        pgm.extend_from_slice(&frame);
+        return match std::fs::write(path, pgm) {
+            Ok(()) => {
+                println!(
+                    "{}: a {radius_mm} mm disc at {} px/mm ({:.2} px)",
+                    path.display(),
+                    scenario.camera.px_per_mm,
+                    radius_mm * scenario.camera.px_per_mm
+                );
+                ExitCode::SUCCESS
+            }
+            Err(e) => {
+                eprintln!("hil-sim: --frame-pgm {}: {e}", path.display());
+                ExitCode::from(1)
+            }
+        };
+    }
+    let mut out = match open_camera_out(args.camera_out.as_deref(), scenario) {
+        Ok(Some(out)) => out,
+        Ok(None) => {
+            eprintln!("hil-sim: --show-disc needs --camera-out DEV or --frame-pgm FILE");
+            return ExitCode::from(2);
+        }
+        Err(code) => return code,
+    };
+    println!(
+        "showing a {radius_mm} mm disc ({:.2} px) on {} until killed",
+        radius_mm * scenario.camera.px_per_mm,
+        args.camera_out
+            .as_deref()
+            .map(|p| p.display().to_string())
+            .unwrap_or_default()
+    );
+    // Eight frames with their own noise, published in turn: the output is kept fed as in
+    // the bench (vivid's loop shows a test pattern when its queue runs dry; its blocking
+    // dequeue paces this loop at its frame rate), a repeat at most every 10 ms for a
+    // device that returns buffers at once (v4l2loopback).
+    const REPEAT_EVERY: std::time::Duration = std::time::Duration::from_millis(10);
+    let frames: Vec<hil_sim::device::SimFrame> = (0..8)
+        .map(|seq| hil_sim::device::SimFrame {
+            seq,
+            timestamp_us: 0,
+            width: scenario.camera.width,
+            height: scenario.camera.height,
+            format: scenario.camera.format,
+            data: disc.frame(),
+            truth_radius_px: disc.radius_px(),
+            captured_at: None,
+        })
+        .collect();
+    for frame in frames.iter().cycle() {
+        let started = Instant::now();
+        if let Err(e) = out.write_frame(frame) {
+            eprintln!("hil-sim: {e}");
+            return ExitCode::from(1);
+        }
+        std::thread::sleep(REPEAT_EVERY.saturating_sub(started.elapsed()));
+    }
+    ExitCode::SUCCESS
 }
 
 /// Opens `--camera-out` in the scenario camera's format and size.
