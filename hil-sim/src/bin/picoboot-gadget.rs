@@ -25,8 +25,7 @@ use std::time::Duration;
 use hil_sim::functionfs::{self, Event, Setup};
 use usb::bootrom::{BootRom, BootRomError, Expect, command_name};
 use usb::picoboot::{
-    CMD_WRITE, REQ_GET_COMMAND_STATUS, REQ_INTERFACE_RESET, REQTYPE_IN, REQTYPE_OUT,
-    status_name,
+    CMD_WRITE, REQ_GET_COMMAND_STATUS, REQ_INTERFACE_RESET, REQTYPE_IN, REQTYPE_OUT, status_name,
 };
 
 const USAGE: &str = "usage: picoboot-gadget --ffs DIR [--flash-out FILE] [--flash-size BYTES]

@@ -136,7 +136,7 @@ impl FlashImage {
                     "target address 0x{addr:08x} is not 256-byte aligned"
                 )));
             }
-            if addr < RP2040_FLASH_START || addr >= RP2040_FLASH_END {
+            if !(RP2040_FLASH_START..RP2040_FLASH_END).contains(&addr) {
                 return Err(Uf2Error::NotInFlash {
                     paddr: addr,
                     len: RP2040_PAGE_SIZE,
