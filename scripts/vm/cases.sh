@@ -159,12 +159,13 @@ bootrom_sysfs() {
     return 1
 }
 
-# A boot ROM with an erased flash, plugged in and enumerated by the host.
+# A boot ROM with an erased flash, plugged in and enumerated by the host (arguments:
+# more options of picoboot-gadget).
 bootrom_start() {
     bootrom_stop
     bootrom_create || return 1
     rm -f "$BOOTROM_FLASH"
-    picoboot-gadget --ffs "$FFS" --flash-out "$BOOTROM_FLASH" >"$BOOTROM_LOG" 2>&1 &
+    picoboot-gadget --ffs "$FFS" --flash-out "$BOOTROM_FLASH" "$@" >"$BOOTROM_LOG" 2>&1 &
     BOOTROM_PID=$!
     # the endpoint files appear once the descriptors are written
     wait_for "$FFS/ep2" 30 || { cat "$BOOTROM_LOG"; return 1; }
@@ -330,6 +331,23 @@ case_flash_writes_image() {
     reads=$(grep -c ': READ' "$BOOTROM_LOG")
     detail "$what: $i pages 0x$(printf %08x "$first")..0x$(printf %08x $((last + 256))) equal in the flash ($erases erases, $writes writes, $reads read-backs, flashed in $(awk "BEGIN { printf \"%.1f\", $t1 - $t0 }") s), REBOOT received"
     [ "$i" -gt 0 ]
+}
+
+# A command the boot ROM rejects: a flash of 16 KiB, too small for the 20000-byte test
+# image's erase. The boot ROM stalls the endpoint, tactile asks GET_COMMAND_STATUS on the
+# control endpoint and reports the status; nothing is written and there is no REBOOT.
+case_flash_reports_device_error() {
+    bootrom_start --flash-size 16384 || return 1
+    timeout 120 tactile flash /data/test-image.elf >/tmp/flash-err.out 2>&1
+    rc=$?
+    bootrom_stop
+    cat /tmp/flash-err.out "$BOOTROM_LOG"
+    [ "$rc" -ne 0 ] || return 1
+    grep -q 'PICOBOOT command 0x03 failed: device status 4 (INVALID_ADDRESS)' /tmp/flash-err.out || return 1
+    grep -q 'FLASH_ERASE failed: status 4 (INVALID_ADDRESS), endpoint stalled' "$BOOTROM_LOG" || return 1
+    grep -q 'GET_COMMAND_STATUS: status 4' "$BOOTROM_LOG" || return 1
+    if grep -q -E ': (WRITE|REBOOT)' "$BOOTROM_LOG"; then return 1; fi
+    detail "endpoint stalled, status read on ep0; exit $rc: $(grep -o 'error: .*' /tmp/flash-err.out | head -n 1)"
 }
 
 # Images `tactile flash` must refuse before it touches the device: an ELF cut inside its
@@ -562,6 +580,7 @@ run acm_enumerates
 run devices_lists_controller
 run devices_lists_bootrom
 run flash_writes_image
+run flash_reports_device_error
 run flash_refuses_bad_image
 run calibrate_manometer
 run daemon_reconnects

@@ -129,12 +129,23 @@ fn main() -> ExitCode {
     }
 }
 
-fn open(path: &Path, write: bool) -> Result<File, String> {
+/// An endpoint file, open for both directions: a transfer in the endpoint's wrong direction
+/// halts it (FunctionFS's way of stalling).
+fn open_endpoint(path: &Path) -> Result<File, String> {
     OpenOptions::new()
-        .read(!write)
-        .write(write)
+        .read(true)
+        .write(true)
         .open(path)
         .map_err(|e| format!("{}: {e}", path.display()))
+}
+
+/// Stalls an endpoint: FunctionFS halts it and fails the transfer with EBADMSG.
+fn halt(result: std::io::Result<usize>) -> String {
+    match result {
+        Err(e) if e.raw_os_error() == Some(libc::EBADMSG) => "endpoint stalled".to_string(),
+        Err(e) => format!("stalling the endpoint failed: {e}"),
+        Ok(_) => "the endpoint did not stall".to_string(),
+    }
 }
 
 fn serve(args: &Args) -> Result<(), String> {
@@ -148,8 +159,8 @@ fn serve(args: &Args) -> Result<(), String> {
         .map_err(|e| format!("{}: writing the descriptors: {e}", ep0_path.display()))?;
     ep0.write_all(&functionfs::strings(&["RP2040 PICOBOOT"]))
         .map_err(|e| format!("{}: writing the strings: {e}", ep0_path.display()))?;
-    let ep_out = open(&args.ffs.join("ep1"), false)?;
-    let ep_in = open(&args.ffs.join("ep2"), true)?;
+    let ep_out = open_endpoint(&args.ffs.join("ep1"))?;
+    let ep_in = open_endpoint(&args.ffs.join("ep2"))?;
     log(&format!(
         "ready on {} (flash {} bytes, erased)",
         args.ffs.display(),
@@ -220,6 +231,10 @@ fn control_request(rom: &Mutex<BootRom>, ep0: &mut File, setup: Setup) {
         }
         (REQTYPE_IN, REQ_GET_COMMAND_STATUS) => {
             let status = lock(rom).command_status();
+            log(&format!(
+                "GET_COMMAND_STATUS: status {}",
+                u32::from_le_bytes([status[4], status[5], status[6], status[7]])
+            ));
             let n = usize::from(setup.length).min(status.len());
             ep0.write(&status[..n]).map(drop)
         }
@@ -311,18 +326,22 @@ fn bulk_loop(rom: &Mutex<BootRom>, mut ep_out: File, mut ep_in: File, flash_out:
             }
             let status = r.status;
             drop(r);
-            log(&format!(
-                "command 0x{cmd:02x} {} failed: {e}; status {status} ({}), endpoint stalled",
-                command_name(cmd),
-                status_name(status)
-            ));
             // The endpoint the host uses next stalls: WRITE's data phase on OUT, else the
             // IN endpoint (data or acknowledgement). The wrong direction halts it.
-            let _ = if cmd == CMD_WRITE {
+            let stalled = halt(if cmd == CMD_WRITE {
                 ep_out.write(&[0u8; 1])
             } else {
                 ep_in.read(&mut [0u8; 1])
+            });
+            let why = match e {
+                BootRomError::Status(_) => String::new(),
+                BootRomError::Protocol(v) => format!(" ({v})"),
             };
+            log(&format!(
+                "command 0x{cmd:02x} {} failed{why}: status {status} ({}), {stalled}",
+                command_name(cmd),
+                status_name(status)
+            ));
         }
     }
 }
