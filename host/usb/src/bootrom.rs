@@ -12,8 +12,9 @@
 //! bytes to 0xFF; programming can only clear bits, so writing an unerased page corrupts).
 //!
 //! Two kinds of failure: [`BootRomError::Status`] is what the boot ROM reports (it stalls
-//! the endpoint and GET_COMMAND_STATUS returns the code); [`BootRomError::Protocol`] is a
-//! host that broke the sequence (a bug in the host, which the tests turn into a failure).
+//! the endpoint and GET_COMMAND_STATUS returns the code; the command is over);
+//! [`BootRomError::Protocol`] is a host that broke the sequence (a bug in the host, which the
+//! tests turn into a failure; the boot ROM stays where it was).
 
 use super::picoboot::{
     CMD_EXCLUSIVE_ACCESS, CMD_EXIT_XIP, CMD_FLASH_ERASE, CMD_READ, CMD_REBOOT, CMD_WRITE,
@@ -195,6 +196,7 @@ impl BootRom {
             Phase::DataOut { addr, len, done } => {
                 if done + data.len() > len {
                     let phase = Phase::DataOut { addr, len, done };
+                    self.phase = phase.clone();
                     return Err(ProtocolViolation::UnexpectedOut {
                         got: data.len(),
                         phase,
@@ -225,11 +227,14 @@ impl BootRom {
                 Ok(data.len())
             }
             Phase::AckOut if data.is_empty() => Ok(0),
-            phase => Err(ProtocolViolation::UnexpectedOut {
-                got: data.len(),
-                phase,
+            phase => {
+                self.phase = phase.clone();
+                Err(ProtocolViolation::UnexpectedOut {
+                    got: data.len(),
+                    phase,
+                }
+                .into())
             }
-            .into()),
         }
     }
 

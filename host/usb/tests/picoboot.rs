@@ -203,3 +203,133 @@ fn a_rejected_write_reports_the_device_status() {
     );
     assert!(msg.contains("INVALID_ADDRESS"), "{msg}");
 }
+
+/// The boot ROM model directly: what it enforces, transfer by transfer.
+mod model {
+    use super::*;
+    use usb::bootrom::{Expect, ProtocolViolation};
+
+    fn erased() -> BootRom {
+        BootRom::new(vec![0xFF; 64 * 1024])
+    }
+
+    fn cmd(rom: &mut BootRom, token: u32, id: u8, args: &[u8], transfer: u32) {
+        assert_eq!(
+            rom.bulk_out(&command_packet(token, id, args, transfer)),
+            Ok(32)
+        );
+    }
+
+    fn ack_in(rom: &mut BootRom) {
+        assert_eq!(rom.expect(), Expect::In);
+        assert_eq!(rom.bulk_in(), Ok(Vec::new()));
+        assert_eq!(rom.expect(), Expect::Out(32));
+    }
+
+    fn unlocked() -> BootRom {
+        let mut rom = erased();
+        cmd(&mut rom, 1, 0x01, &[2], 0);
+        ack_in(&mut rom);
+        cmd(&mut rom, 2, 0x06, &[], 0);
+        ack_in(&mut rom);
+        rom
+    }
+
+    #[test]
+    fn writes_only_clear_bits_and_data_may_come_in_pieces() {
+        let mut rom = unlocked();
+        cmd(&mut rom, 3, 0x05, &addr_size(0x1000_0000, 512), 512);
+        assert_eq!(rom.expect(), Expect::Out(512));
+        assert_eq!(rom.bulk_out(&[0x0F; 256]), Ok(256));
+        assert_eq!(rom.expect(), Expect::Out(256));
+        assert_eq!(rom.bulk_out(&[0xAA; 256]), Ok(256));
+        ack_in(&mut rom);
+        // the same page again without an erase: old AND new
+        cmd(&mut rom, 4, 0x05, &addr_size(0x1000_0000, 256), 256);
+        assert_eq!(rom.bulk_out(&[0xF3; 256]), Ok(256));
+        ack_in(&mut rom);
+        assert_eq!(rom.flash[0], 0x03);
+        assert_eq!(rom.flash[256], 0xAA);
+        // READ: data, then a zero-length OUT
+        cmd(&mut rom, 5, 0x84, &addr_size(0x1000_0100, 4), 4);
+        assert_eq!(rom.bulk_in(), Ok(vec![0xAA; 4]));
+        assert_eq!(rom.expect(), Expect::Out(0));
+        assert_eq!(rom.bulk_out(&[]), Ok(0));
+        // erase sets whole sectors to 0xFF
+        cmd(&mut rom, 6, 0x03, &addr_size(0x1000_0000, 4096), 0);
+        ack_in(&mut rom);
+        assert!(rom.flash[..4096].iter().all(|&b| b == 0xFF));
+    }
+
+    #[test]
+    fn failures_are_statuses_and_broken_sequences_violations() {
+        let mut rom = erased();
+        let erase = addr_size(0x1000_0000, 4096);
+        assert_eq!(
+            rom.bulk_out(&command_packet(1, 0x03, &erase, 0)),
+            Err(BootRomError::Protocol(ProtocolViolation::NotExclusive(
+                0x03
+            )))
+        );
+        let mut rom = unlocked();
+        assert_eq!(
+            rom.bulk_out(&command_packet(3, 0x03, &addr_size(0x1000_0100, 4096), 0)),
+            Err(BootRomError::Status(5)),
+            "erase off a sector boundary: BAD_ALIGNMENT"
+        );
+        let status = rom.command_status();
+        assert_eq!(&status[0..4], &3u32.to_le_bytes(), "dToken");
+        assert_eq!(&status[4..8], &5u32.to_le_bytes(), "dStatusCode");
+        assert_eq!(status[8], 0x03, "bCmdId");
+        assert_eq!(
+            rom.bulk_out(&command_packet(4, 0x05, &addr_size(0x1000_0000, 100), 100)),
+            Err(BootRomError::Status(5)),
+            "write of a partial page"
+        );
+        assert_eq!(
+            rom.bulk_out(&command_packet(5, 0x05, &addr_size(0x1001_0000, 256), 256)),
+            Err(BootRomError::Status(4)),
+            "beyond the 64 KiB flash: INVALID_ADDRESS"
+        );
+        assert_eq!(
+            rom.bulk_out(&command_packet(6, 0x05, &addr_size(0x1000_0000, 256), 0)),
+            Err(BootRomError::Status(3)),
+            "dTransferLength differs from the size"
+        );
+        assert_eq!(
+            rom.bulk_out(&command_packet(7, 0x03, &[0; 4], 0)),
+            Err(BootRomError::Status(2)),
+            "bCmdSize 4 for an erase"
+        );
+        assert_eq!(
+            rom.bulk_out(&command_packet(8, 0x7F, &[], 0)),
+            Err(BootRomError::Status(1))
+        );
+        let mut bad_magic = command_packet(9, 0x06, &[], 0);
+        bad_magic[0] ^= 1;
+        assert!(matches!(
+            rom.bulk_out(&bad_magic),
+            Err(BootRomError::Protocol(ProtocolViolation::Magic(_)))
+        ));
+        cmd(&mut rom, 10, 0x06, &[], 0);
+        assert_eq!(
+            rom.bulk_out(&command_packet(11, 0x06, &[], 0)),
+            Err(BootRomError::Protocol(ProtocolViolation::UnexpectedOut {
+                got: 32,
+                phase: usb::bootrom::Phase::AckIn
+            })),
+            "a new command before the acknowledgement"
+        );
+        assert_eq!(
+            rom.expect(),
+            Expect::In,
+            "still waiting for the acknowledgement"
+        );
+        rom.interface_reset();
+        assert_eq!(
+            rom.bulk_out(&command_packet(10, 0x06, &[], 0)),
+            Err(BootRomError::Protocol(ProtocolViolation::TokenRepeated(10))),
+        );
+        assert_eq!(rom.log.last(), Some(&Logged::Reset));
+    }
+}
