@@ -25,7 +25,8 @@ use std::time::Duration;
 use hil_sim::functionfs::{self, Event, Setup};
 use usb::bootrom::{BootRom, BootRomError, Expect, command_name};
 use usb::picoboot::{
-    CMD_WRITE, REQ_GET_COMMAND_STATUS, REQ_INTERFACE_RESET, REQTYPE_IN, REQTYPE_OUT, status_name,
+    CMD_EXCLUSIVE_ACCESS, CMD_FLASH_ERASE, CMD_READ, CMD_REBOOT, CMD_WRITE, REQ_GET_COMMAND_STATUS,
+    REQ_INTERFACE_RESET, REQTYPE_IN, REQTYPE_OUT, status_name,
 };
 
 const USAGE: &str = "usage: picoboot-gadget --ffs DIR [--flash-out FILE] [--flash-size BYTES]
@@ -359,9 +360,9 @@ fn describe(p: &[u8]) -> String {
     let id = p[8];
     let name = command_name(id);
     match id {
-        0x03 | 0x84 | 0x05 => format!("{name} 0x{:08x} +{}", le(16), le(20)),
-        0x01 => format!("{name} mode {}", p[16]),
-        0x02 => format!(
+        CMD_FLASH_ERASE | CMD_READ | CMD_WRITE => format!("{name} 0x{:08x} +{}", le(16), le(20)),
+        CMD_EXCLUSIVE_ACCESS => format!("{name} mode {}", p[16]),
+        CMD_REBOOT => format!(
             "{name} pc 0x{:08x} sp 0x{:08x} delay {} ms",
             le(16),
             le(20),
