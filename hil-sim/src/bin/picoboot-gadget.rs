@@ -290,9 +290,15 @@ fn bulk_loop(rom: &Mutex<BootRom>, mut ep_out: File, mut ep_in: File, flash_out:
                     Ok(data) => {
                         // `write`, not `write_all`: a zero-length acknowledgement is one
                         // write of nothing
-                        if let Err(e) = ep_in.write(&data) {
-                            io_error("ep2 (bulk IN)", &e);
-                            continue;
+                        match ep_in.write(&data) {
+                            Ok(n) if n == data.len() => {}
+                            Ok(n) => {
+                                log(&format!("ep2 (bulk IN): {n} of {} bytes sent", data.len()))
+                            }
+                            Err(e) => {
+                                io_error("ep2 (bulk IN)", &e);
+                                continue;
+                            }
                         }
                         let r = lock(rom);
                         if data.is_empty()
