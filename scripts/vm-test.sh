@@ -2,8 +2,10 @@
 # The kernel-driver tier: the release binaries of `tactile` and `hil-sim` in a virtual
 # machine (qemu-system-x86_64, Debian's stock kernel, a busybox initramfs), talking through
 # Linux's own drivers: a CDC-ACM USB gadget on dummy_hcd (cdc-acm on the host side,
-# /dev/ttyACM0, VID:PID 1209:7AC7) served by hil-sim on /dev/ttyGS0, and vivid's video
-# output -> capture loop carrying hil-sim's rendered frames to `tactile`'s V4L2 capture.
+# /dev/ttyACM0, VID:PID 1209:7AC7) served by hil-sim on /dev/ttyGS0, an RP2040 boot ROM
+# (2E8A:0003, PICOBOOT through FunctionFS, served by hil-sim's picoboot-gadget) that
+# `tactile flash` writes through libusb, and vivid's video output -> capture loop carrying
+# hil-sim's rendered frames to `tactile`'s V4L2 capture.
 # The cases themselves are scripts/vm/cases.sh (run by scripts/vm/init.sh as PID 1).
 #
 # Installs what it needs (idempotent): qemu-system-x86, busybox-static and v4l-utils (its
@@ -16,7 +18,9 @@
 # emulation without KVM; a loaded 2-core machine may need several times that),
 # VM_SKIP_BUILD=1 (use the existing release binaries), VM_KEEP=1 (keep the initramfs
 # tree), VM_CASES=a,b (only these cases of scripts/vm/cases.sh), VM_CPUS (default 2),
-# VM_MEM_MB (default 1024), VM_ACCEL=kvm (hardware virtualisation instead of TCG).
+# VM_MEM_MB (default 1024), VM_ACCEL=kvm (hardware virtualisation instead of TCG),
+# TACTILE_FIRMWARE_ELF (the firmware the flashing case writes; default the release build of
+# firmware/rp2040 if there is one, else a small test image).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 root=$(pwd)
@@ -72,7 +76,7 @@ if [ "${VM_SKIP_BUILD:-0}" != 1 ]; then
     cargo build --release -p tactile -p hil-sim
     say "release build: $(($(date +%s) - build_start)) s"
 fi
-bins=(target/release/tactile target/release/hil-sim)
+bins=(target/release/tactile target/release/hil-sim target/release/picoboot-gadget)
 for b in "${bins[@]}"; do
     [ -x "$b" ] || { say "$b missing (cargo build --release -p tactile -p hil-sim)"; exit 1; }
 done
@@ -93,6 +97,26 @@ for lib in $(ldd "${bins[@]}" "$v4l2ctl" 2>/dev/null | awk '$2 == "=>" && $3 ~ /
 done
 cp -r fem-core/data/. "$tree/data/"
 cp -r hil-sim/scenarios "$tree/data/scenarios"
+# Images for the flashing cases: the firmware ELF if it has been built (TACTILE_FIRMWARE_ELF,
+# or the release build of firmware/rp2040), and two small ELF files written here: 20000
+# bytes of a repeated text at 0x10000000 (flashed when there is no firmware build, and cut
+# short for a refused image), and the same at 0x20000000 (RAM: refused).
+firmware_elf=${TACTILE_FIRMWARE_ELF:-firmware/rp2040/target/thumbv6m-none-eabi/release/tactile-rp2040}
+if [ -f "$firmware_elf" ]; then cp "$firmware_elf" "$tree/data/firmware.elf"; fi
+le32() { printf "$(printf '\\x%02x\\x%02x\\x%02x\\x%02x' $(($1 & 255)) $(($1 >> 8 & 255)) $(($1 >> 16 & 255)) $(($1 >> 24 & 255)))"; }
+le16() { printf "$(printf '\\x%02x\\x%02x' $(($1 & 255)) $(($1 >> 8 & 255)))"; }
+# ELF32 little-endian ARM executable with one PT_LOAD segment of $2 bytes at $1 (System V
+# ABI: 52-byte header, 32-byte program header, the segment's bytes at offset 84).
+test_elf() {
+    printf '\x7fELF\x01\x01\x01\x00\x00\x00\x00\x00\x00\x00\x00\x00'
+    le16 2; le16 40; le32 1; le32 $(($1 + 1)); le32 52; le32 0; le32 0x05000200
+    le16 52; le16 32; le16 1; le16 40; le16 0; le16 0
+    le32 1; le32 84; le32 "$1"; le32 "$1"; le32 "$2"; le32 "$2"; le32 5; le32 4
+    awk -v n="$2" 'BEGIN { while (length(s) < n) s = s "picoboot test image, page after page "
+        printf "%s", substr(s, 1, n) }'
+}
+test_elf 0x10000000 20000 >"$tree/data/test-image.elf"
+test_elf 0x20000000 20000 >"$tree/data/ram-image.elf"
 cp scripts/vm/init.sh "$tree/init"
 cp scripts/vm/cases.sh "$tree/cases.sh"
 chmod +x "$tree/init" "$tree/cases.sh"
@@ -122,7 +146,7 @@ add_module() {
     loaded[$name]=1
     order+=("$name")
 }
-for m in configfs dummy_hcd libcomposite usb_f_acm cdc_acm vivid; do add_module "$m"; done
+for m in configfs dummy_hcd libcomposite usb_f_acm usb_f_fs cdc_acm vivid; do add_module "$m"; done
 for m in "${order[@]}"; do
     cp "${modpath[$m]}" "$tree/lib/modules/$m.ko"
 done

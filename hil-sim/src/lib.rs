@@ -17,6 +17,10 @@
 //!
 //! The real firmware: [`firmware_emulation::FirmwareDevice`] puts the RP2040 release binary,
 //! running in an emulated chip, in place of the library controller (`hil-sim --firmware`).
+//!
+//! The boot ROM: the `picoboot-gadget` binary serves the RP2040 boot ROM's PICOBOOT
+//! interface (the model in `usb::bootrom`) on a Linux USB gadget through [`functionfs`],
+//! for flashing tests against the kernel's USB stack.
 
 pub mod bench;
 pub mod camera;
@@ -25,6 +29,7 @@ pub mod device;
 pub mod effects;
 pub mod faults;
 pub mod firmware_emulation;
+pub mod functionfs;
 pub mod mechanics;
 pub mod mechanics_source;
 pub use pneumatic_plant as pneumatics;

@@ -117,6 +117,73 @@ hilsim_stop() {
     return 0
 }
 
+# The RP2040 boot ROM in BOOTSEL mode (2E8A:0003) on a second gadget: an `ffs.picoboot`
+# FunctionFS function served by picoboot-gadget (PICOBOOT on a vendor interface with the
+# boot ROM model of the usb crate behind it), bound to dummy_hcd's second UDC (the module
+# is loaded with num=2), so that the controller's gadget keeps the first.
+BOOTROM=/sys/kernel/config/usb_gadget/bootrom
+FFS=/dev/ffs-picoboot
+BOOTROM_LOG=/tmp/picoboot-gadget.log
+BOOTROM_FLASH=/tmp/flash.bin
+BOOTROM_PID=
+
+bootrom_create() {
+    [ -d "$BOOTROM" ] && return 0
+    mkdir "$BOOTROM" || return 1
+    echo 0x2e8a >"$BOOTROM/idVendor"
+    echo 0x0003 >"$BOOTROM/idProduct"
+    echo 0x0200 >"$BOOTROM/bcdUSB"
+    mkdir "$BOOTROM/strings/0x409"
+    echo "Raspberry Pi" >"$BOOTROM/strings/0x409/manufacturer"
+    echo "RP2 Boot" >"$BOOTROM/strings/0x409/product"
+    echo "E0C9125B0D9B" >"$BOOTROM/strings/0x409/serialnumber"
+    mkdir "$BOOTROM/configs/c.1"
+    mkdir "$BOOTROM/functions/ffs.picoboot" || return 1
+    ln -s "$BOOTROM/functions/ffs.picoboot" "$BOOTROM/configs/c.1/"
+    mkdir -p "$FFS"
+    mount -t functionfs picoboot "$FFS"
+}
+
+# The host side of the boot ROM gadget in sysfs, if it is enumerated.
+bootrom_sysfs() {
+    for d in /sys/bus/usb/devices/*; do
+        [ "$(cat "$d/idVendor" 2>/dev/null):$(cat "$d/idProduct" 2>/dev/null)" = 2e8a:0003 ] || continue
+        echo "$d"
+        return 0
+    done
+    return 1
+}
+
+# A boot ROM with an erased flash, plugged in and enumerated by the host (arguments:
+# more options of picoboot-gadget).
+bootrom_start() {
+    bootrom_stop
+    bootrom_create || return 1
+    rm -f "$BOOTROM_FLASH"
+    picoboot-gadget --ffs "$FFS" --flash-out "$BOOTROM_FLASH" "$@" >"$BOOTROM_LOG" 2>&1 &
+    BOOTROM_PID=$!
+    # the endpoint files appear once the descriptors are written
+    wait_for "$FFS/ep2" 30 || { cat "$BOOTROM_LOG"; return 1; }
+    ls /sys/class/udc | sed -n 2p >"$BOOTROM/UDC" || return 1
+    i=0
+    until bootrom_sysfs >/dev/null; do
+        i=$((i + 1))
+        [ "$i" -gt 600 ] && { echo "2e8a:0003 not enumerated in 60 s"; cat "$BOOTROM_LOG"; return 1; }
+        sleep 0.1
+    done
+}
+
+# Stops picoboot-gadget (it writes its flash) and unplugs the gadget if it is still bound.
+bootrom_stop() {
+    if [ -n "$BOOTROM_PID" ]; then
+        kill "$BOOTROM_PID" 2>/dev/null
+        wait "$BOOTROM_PID" 2>/dev/null
+    fi
+    BOOTROM_PID=
+    if [ -n "$(cat "$BOOTROM/UDC" 2>/dev/null)" ]; then echo "" >"$BOOTROM/UDC"; fi
+    return 0
+}
+
 # --- serial: the controller on a real CDC-ACM port --------------------------------------
 
 case_acm_enumerates() {
@@ -208,6 +275,102 @@ case_daemon_reconnects() {
     gap=$(sed -n 's/.*"gap_s": \([0-9.]*\).*/\1/p' /tmp/status.json)
     detail "unplugged and replugged: reconnected by USB serial number, $before -> $after after a gap of $gap s"
     [ -n "$before" ] && [ -n "$after" ] && [ "$before" != "$after" ]
+}
+
+# --- flashing: the RP2040 boot ROM on a real USB gadget -----------------------------------
+
+case_devices_lists_bootrom() {
+    bootrom_start || return 1
+    tactile devices >/tmp/devices-rom.txt 2>&1 || { cat /tmp/devices-rom.txt; return 1; }
+    cat /tmp/devices-rom.txt
+    line=$(grep '^  bus .*2e8a:0003' /tmp/devices-rom.txt)
+    bootrom_stop
+    echo "$line" | grep -q "2e8a:0003  RP2040 boot ROM (BOOTSEL), ready to flash serial E0C9125B0D9B" || return 1
+    detail "$(echo "$line" | sed 's/^ *//')"
+}
+
+# `tactile flash` through libusb, usbfs and dummy_hcd into the boot ROM model; then every
+# 256-byte page of the UF2 that tactile makes of the same ELF against the flash the gadget
+# wrote on REBOOT.
+case_flash_writes_image() {
+    img=/data/firmware.elf
+    what="the firmware"
+    [ -e "$img" ] || { img=/data/test-image.elf; what="the test image"; }
+    bootrom_start || return 1
+    t0=$(cut -d' ' -f1 /proc/uptime)
+    timeout 300 tactile flash "$img" >/tmp/flash.out 2>&1
+    rc=$?
+    t1=$(cut -d' ' -f1 /proc/uptime)
+    cat /tmp/flash.out
+    # after REBOOT the gadget writes its flash and leaves the bus
+    wait_for "$BOOTROM_FLASH" 30
+    wait "$BOOTROM_PID"
+    BOOTROM_PID=
+    cat "$BOOTROM_LOG"
+    [ "$rc" = 0 ] || return 1
+    grep -q 'REBOOT pc 0x00000000 sp 0x20042000 delay 500 ms' "$BOOTROM_LOG" || return 1
+    [ -s "$BOOTROM_FLASH" ] || return 1
+    tactile flash "$img" --uf2-out /tmp/image.uf2 || return 1
+    # targetAddr (byte 12) of each 512-byte block
+    od -A n -t u4 -v -w512 /tmp/image.uf2 | awk '{ print $4 }' >/tmp/uf2-addrs
+    i=0
+    while read -r addr; do
+        cmp -n 256 /tmp/image.uf2 "$BOOTROM_FLASH" $((i * 512 + 32)) $((addr - 0x10000000)) ||
+            { echo "page 0x$(printf %08x "$addr") differs"; return 1; }
+        i=$((i + 1))
+    done </tmp/uf2-addrs
+    first=$(head -n 1 /tmp/uf2-addrs)
+    last=$(tail -n 1 /tmp/uf2-addrs)
+    erases=$(grep -c 'FLASH_ERASE' "$BOOTROM_LOG")
+    writes=$(grep -c ': WRITE' "$BOOTROM_LOG")
+    reads=$(grep -c ': READ' "$BOOTROM_LOG")
+    detail "$what: $i pages 0x$(printf %08x "$first")..0x$(printf %08x $((last + 256))) equal in the flash ($erases erases, $writes writes, $reads read-backs, flashed in $(awk "BEGIN { printf \"%.1f\", $t1 - $t0 }") s), REBOOT received"
+    [ "$i" -gt 0 ]
+}
+
+# A command the boot ROM rejects: a flash of 16 KiB, too small for the 20000-byte test
+# image's erase. The boot ROM stalls the endpoint, tactile asks GET_COMMAND_STATUS on the
+# control endpoint and reports the status; nothing is written and there is no REBOOT.
+case_flash_reports_device_error() {
+    bootrom_start --flash-size 16384 || return 1
+    timeout 120 tactile flash /data/test-image.elf >/tmp/flash-err.out 2>&1
+    rc=$?
+    bootrom_stop
+    cat /tmp/flash-err.out "$BOOTROM_LOG"
+    [ "$rc" -ne 0 ] || return 1
+    grep -q 'PICOBOOT command 0x03 failed: device status 4 (INVALID_ADDRESS)' /tmp/flash-err.out || return 1
+    grep -q 'FLASH_ERASE failed: status 4 (INVALID_ADDRESS), endpoint stalled' "$BOOTROM_LOG" || return 1
+    grep -q 'GET_COMMAND_STATUS: status 4' "$BOOTROM_LOG" || return 1
+    if grep -q -E ': (WRITE|REBOOT)' "$BOOTROM_LOG"; then return 1; fi
+    detail "endpoint stalled, status read on ep0; exit $rc: $(grep -o 'error: .*' /tmp/flash-err.out | head -n 1)"
+}
+
+# Images `tactile flash` must refuse before it touches the device: an ELF cut inside its
+# segment, an ELF whose segment lies in RAM, a UF2 file cut short, and a UF2 file for
+# another chip family (0xada52840, the nRF52840's).
+case_flash_refuses_bad_image() {
+    bootrom_start || return 1
+    head -c 1000 /data/test-image.elf >/tmp/truncated.elf
+    tactile flash /data/test-image.elf --uf2-out /tmp/test.uf2 || return 1
+    head -c $((40 * 512)) /tmp/test.uf2 >/tmp/truncated.uf2
+    cp /tmp/test.uf2 /tmp/family.uf2
+    printf '\x40\x28\xa5\xad' | dd of=/tmp/family.uf2 bs=1 seek=$((5 * 512 + 28)) conv=notrunc 2>/dev/null
+    summary=
+    for f in /tmp/truncated.elf /data/ram-image.elf /tmp/truncated.uf2 /tmp/family.uf2; do
+        tactile flash "$f" >/tmp/refuse.out 2>&1
+        rc=$?
+        cat /tmp/refuse.out
+        [ "$rc" -ne 0 ] || { echo "$f: accepted"; bootrom_stop; return 1; }
+        summary="$summary; exit $rc: $(grep -o 'error: .*' /tmp/refuse.out | head -n 1 | sed 's|/tmp/||; s|/data/||')"
+    done
+    bootrom_stop
+    cat "$BOOTROM_LOG"
+    if grep -q -E 'EXCLUSIVE_ACCESS|FLASH_ERASE|WRITE' "$BOOTROM_LOG"; then
+        echo "the boot ROM received commands"
+        return 1
+    fi
+    echo "$summary" | grep -q 'beyond the file.*outside flash.*40 of its 79 blocks.*0xada52840' || return 1
+    detail "${summary#; }; no command reached the boot ROM"
 }
 
 # --- camera: hil-sim's frames through vivid's output -> capture loop ---------------------
@@ -470,6 +633,10 @@ case_hilsim_speed() {
 run hilsim_speed
 run acm_enumerates
 run devices_lists_controller
+run devices_lists_bootrom
+run flash_writes_image
+run flash_reports_device_error
+run flash_refuses_bad_image
 run calibrate_manometer
 run daemon_reconnects
 run vivid_loop
@@ -480,3 +647,4 @@ run camera_latency
 run measure
 run camera_unplugged
 hilsim_stop
+bootrom_stop

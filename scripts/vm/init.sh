@@ -26,6 +26,9 @@ modules_ok=1
 for m in $(cat /lib/modules/order); do
     args=
     case "$m" in
+    # two device controllers: the controller's gadget on the first, the boot ROM's on the
+    # second
+    dummy_hcd) args="num=2" ;;
     # One instance with a video capture node (/dev/video0, one HDMI input) and a video
     # output node (/dev/video1, one HDMI output), no cropping, composing or scaling: the
     # output -> capture loop then passes frames through pixel for pixel.

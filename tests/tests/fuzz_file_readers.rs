@@ -417,6 +417,14 @@ fn firmware_elf_and_uf2() {
     });
     fuzz("firmware_uf2", &[uf2], |bytes| {
         let _ = usb::uf2::parse_uf2(bytes);
+        if let Ok(image) = usb::uf2::FlashImage::from_uf2(bytes) {
+            // What is accepted is the image its own UF2 file reads back as.
+            let again = usb::uf2::FlashImage::from_uf2(&image.to_uf2())
+                .map_err(|e| format!("accepted UF2 gives an unreadable UF2: {e}"))?;
+            if again != image {
+                return Err("accepted UF2 does not read back as the same image".to_string());
+            }
+        }
         Ok(())
     });
 }

@@ -19,7 +19,7 @@ enum Command {
     Radius(cli::radius::RadiusArgs),
     /// List serial ports, tactile controllers and RP2040 boot ROMs.
     Devices(cli::devices::DevicesArgs),
-    /// Convert firmware ELF to UF2, or flash it over PICOBOOT.
+    /// Convert firmware ELF to UF2, or flash it (ELF or UF2) over PICOBOOT.
     Flash(cli::flash::FlashArgs),
     /// Lookup table of simulated curves: build (sharded), merge, info.
     Lut(cli::lut::LutArgs),

@@ -1,5 +1,7 @@
-//! USB and serial device discovery, ELF to UF2 conversion and PICOBOOT flashing.
+//! USB and serial device discovery, ELF to UF2 conversion and PICOBOOT flashing, and a
+//! model of the boot ROM side of PICOBOOT ([`bootrom`]) for testing it.
 
+pub mod bootrom;
 pub mod bootsel_request;
 pub mod discovery;
 pub mod elf_image;

@@ -34,7 +34,17 @@ pub enum Uf2Error {
     Empty,
     #[error("UF2 block {index}: {message}")]
     BadBlock { index: usize, message: String },
+    #[error(
+        "UF2 block {index}: family ID {} is not the RP2040's (0xe48bff56)",
+        .family.map_or("absent".to_string(), |f| format!("0x{f:08x}"))
+    )]
+    Family { index: usize, family: Option<u32> },
+    #[error("UF2 file has {have} of its {want} blocks (truncated?)")]
+    MissingBlocks { have: usize, want: u32 },
 }
+
+/// UF2 flag: the block is not for the main flash (comments, other files); skipped.
+pub const UF2_FLAG_NOT_MAIN_FLASH: u32 = 0x0000_0001;
 
 /// Flash contents by 256-byte page (page address -> bytes, unused bytes 0x00 as in
 /// the Pico SDK's elf2uf2).
@@ -69,6 +79,80 @@ impl FlashImage {
                 let page = addr & !(RP2040_PAGE_SIZE as u32 - 1);
                 pages.entry(page).or_insert([0u8; RP2040_PAGE_SIZE])[(addr - page) as usize] = b;
             }
+        }
+        if pages.is_empty() {
+            return Err(Uf2Error::Empty);
+        }
+        Ok(Self { pages })
+    }
+
+    /// The flash image of an RP2040 UF2 file, checked as the boot ROM would before writing
+    /// anything: every block (other than those flagged not for the main flash) carries the
+    /// RP2040 family ID and 256 bytes for a 256-byte aligned flash address, block numbers
+    /// run from 0 to `numBlocks - 1` with none missing or repeated, and no page twice.
+    pub fn from_uf2(bytes: &[u8]) -> Result<Self, Uf2Error> {
+        let blocks = parse_uf2(bytes)?;
+        let mut pages: BTreeMap<u32, [u8; RP2040_PAGE_SIZE]> = BTreeMap::new();
+        let want = blocks.first().map_or(0, |b| b.num_blocks);
+        let mut seen = vec![false; blocks.len()];
+        for (index, b) in blocks.iter().enumerate() {
+            let bad = |message: String| Uf2Error::BadBlock { index, message };
+            if b.num_blocks != want {
+                return Err(bad(format!(
+                    "numBlocks {} differs from the first block's {want}",
+                    b.num_blocks
+                )));
+            }
+            let no = b.block_no as usize;
+            if b.block_no >= want || no >= seen.len() || seen[no] {
+                if want as usize > blocks.len() {
+                    return Err(Uf2Error::MissingBlocks {
+                        have: blocks.len(),
+                        want,
+                    });
+                }
+                return Err(bad(format!(
+                    "blockNo {} repeated or beyond numBlocks {want}",
+                    b.block_no
+                )));
+            }
+            seen[no] = true;
+            if b.flags & UF2_FLAG_NOT_MAIN_FLASH != 0 {
+                continue;
+            }
+            if b.flags & UF2_FLAG_FAMILY_ID_PRESENT == 0 || b.family_id != RP2040_FAMILY_ID {
+                let family = (b.flags & UF2_FLAG_FAMILY_ID_PRESENT != 0).then_some(b.family_id);
+                return Err(Uf2Error::Family { index, family });
+            }
+            if b.payload_size as usize != RP2040_PAGE_SIZE {
+                return Err(bad(format!(
+                    "payload size {} (the RP2040 takes 256-byte pages)",
+                    b.payload_size
+                )));
+            }
+            let addr = b.target_addr;
+            if addr % RP2040_PAGE_SIZE as u32 != 0 {
+                return Err(bad(format!(
+                    "target address 0x{addr:08x} is not 256-byte aligned"
+                )));
+            }
+            if !(RP2040_FLASH_START..RP2040_FLASH_END).contains(&addr) {
+                return Err(Uf2Error::NotInFlash {
+                    paddr: addr,
+                    len: RP2040_PAGE_SIZE,
+                });
+            }
+            let mut page = [0u8; RP2040_PAGE_SIZE];
+            page.copy_from_slice(&b.payload);
+            if pages.insert(addr, page).is_some() {
+                return Err(Uf2Error::Overlap(addr));
+            }
+        }
+        if (want as usize) != blocks.len() {
+            return Err(Uf2Error::MissingBlocks {
+                have: blocks.len(),
+                want,
+            });
         }
         if pages.is_empty() {
             return Err(Uf2Error::Empty);

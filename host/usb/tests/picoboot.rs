@@ -1,4 +1,4 @@
-//! The PICOBOOT command sequence against a simulated RP2040 boot ROM that enforces the
+//! The PICOBOOT command sequence against the boot ROM model (usb::bootrom), which enforces the
 //! protocol of the RP2040 datasheet section 2.8.5: 32-byte commands with magic 0x431FD10B,
 //! argument sizes per command, data and zero-length acknowledgement phases, exclusive
 //! access and XIP exit before erase/write, 4096-byte erase and 256-byte write alignment,
@@ -6,212 +6,64 @@
 
 #![allow(clippy::unwrap_used)] // tests may unwrap: a panic fails the test with its message
 
+use usb::bootrom::{BootRom, BootRomError, Logged, Reboot};
 use usb::elf_image::LoadSegment;
 use usb::picoboot::{Picoboot, PicobootError, PicobootTransport, RP2040_SRAM_END, command_packet};
 use usb::uf2::{FlashImage, RP2040_FLASH_START};
 
 const FLASH_SIZE: usize = 2 * 1024 * 1024;
 
-#[derive(Debug, Clone, PartialEq, Eq)]
-enum Logged {
-    Reset,
-    Cmd { id: u8, args: Vec<u8> },
-}
-
-#[derive(Debug, PartialEq, Eq)]
-enum Phase {
-    Command,
-    DataOut { id: u8, addr: u32, len: usize },
-    DataIn { addr: u32, len: usize },
-    AckIn,
-    AckOut,
-}
-
-struct SimBootrom {
-    flash: Vec<u8>,
-    phase: Phase,
-    exclusive: bool,
-    xip_exited: bool,
-    last_token: Option<u32>,
-    status: u32,
-    log: Vec<Logged>,
-    /// Corrupt this flash address on write (a bad flash cell).
-    flip_bit_at: Option<u32>,
-    /// Reject the nth WRITE with this status.
-    fail_write: Option<(usize, u32)>,
-    writes: usize,
-    rebooted: Option<(u32, u32, u32)>,
-}
+/// The boot ROM model (usb::bootrom) as a transport: a failed command stalls the endpoint
+/// (a USB error for the host, which then asks for the status); a protocol violation by the
+/// host fails the test.
+struct SimBootrom(BootRom);
 
 impl SimBootrom {
     fn new() -> Self {
         // Old firmware: arbitrary non-erased contents.
-        let flash = (0..FLASH_SIZE).map(|i| (i * 7 % 253) as u8).collect();
-        Self {
-            flash,
-            phase: Phase::Command,
-            exclusive: false,
-            xip_exited: false,
-            last_token: None,
-            status: 0,
-            log: Vec::new(),
-            flip_bit_at: None,
-            fail_write: None,
-            writes: 0,
-            rebooted: None,
-        }
+        Self(BootRom::new(
+            (0..FLASH_SIZE).map(|i| (i * 7 % 253) as u8).collect(),
+        ))
     }
+}
 
-    fn offset(addr: u32, len: usize) -> Option<usize> {
-        let off = addr.checked_sub(RP2040_FLASH_START)? as usize;
-        (off + len <= FLASH_SIZE).then_some(off)
-    }
-
-    fn fail(&mut self, status: u32) -> Result<usize, PicobootError> {
-        self.status = status;
-        self.phase = Phase::Command;
-        Err(PicobootError::Usb("endpoint stalled".to_string()))
-    }
-
-    fn command(&mut self, p: &[u8]) -> Result<usize, PicobootError> {
-        let le = |o: usize| u32::from_le_bytes([p[o], p[o + 1], p[o + 2], p[o + 3]]);
-        assert_eq!(p.len(), 32, "commands are 32 bytes");
-        assert_eq!(le(0), 0x431F_D10B, "dMagic");
-        let token = le(4);
-        if let Some(t) = self.last_token {
-            assert_ne!(token, t, "each command gets a new token");
-        }
-        self.last_token = Some(token);
-        let (id, size, transfer) = (p[8], p[9] as usize, le(12) as usize);
-        let want_size = match id {
-            0x01 => 1,
-            0x02 => 12,
-            0x03 | 0x84 | 0x05 => 8,
-            0x06 => 0,
-            _ => return self.fail(1),
-        };
-        assert_eq!(size, want_size, "bCmdSize of 0x{id:02x}");
-        assert!(
-            p[16 + size..].iter().all(|&b| b == 0),
-            "unused args are zero"
-        );
-        let args = p[16..16 + size].to_vec();
-        self.log.push(Logged::Cmd {
-            id,
-            args: args.clone(),
-        });
-        let (addr, len) = (le(16), le(20) as usize);
-        self.status = 0;
-        match id {
-            0x01 => {
-                self.exclusive = args[0] != 0;
-                self.phase = Phase::AckIn;
-            }
-            0x06 => {
-                self.xip_exited = true;
-                self.phase = Phase::AckIn;
-            }
-            0x03 => {
-                assert!(
-                    self.exclusive && self.xip_exited,
-                    "erase needs exclusive + XIP exit"
-                );
-                if addr % 4096 != 0 || len % 4096 != 0 {
-                    return self.fail(5);
-                }
-                let Some(off) = Self::offset(addr, len) else {
-                    return self.fail(4);
-                };
-                self.flash[off..off + len].fill(0xFF);
-                self.phase = Phase::AckIn;
-            }
-            0x05 => {
-                assert!(
-                    self.exclusive && self.xip_exited,
-                    "write needs exclusive + XIP exit"
-                );
-                assert_eq!(transfer, len, "dTransferLength = dSize");
-                if addr % 256 != 0 || len % 256 != 0 {
-                    return self.fail(5);
-                }
-                self.writes += 1;
-                if let Some((n, status)) = self.fail_write
-                    && n == self.writes
-                {
-                    return self.fail(status);
-                }
-                self.phase = Phase::DataOut { id, addr, len };
-            }
-            0x84 => {
-                assert_eq!(transfer, len);
-                self.phase = Phase::DataIn { addr, len };
-            }
-            0x02 => {
-                self.rebooted = Some((le(16), le(20), le(24)));
-                self.phase = Phase::AckIn;
-            }
-            _ => unreachable!(),
-        }
-        Ok(32)
+fn stall<T>(e: BootRomError) -> Result<T, PicobootError> {
+    match e {
+        BootRomError::Status(_) => Err(PicobootError::Usb("endpoint stalled".to_string())),
+        BootRomError::Protocol(v) => panic!("{v}"),
     }
 }
 
 impl PicobootTransport for SimBootrom {
     fn bulk_out(&mut self, data: &[u8]) -> Result<usize, PicobootError> {
-        match std::mem::replace(&mut self.phase, Phase::Command) {
-            Phase::Command => self.command(data),
-            Phase::DataOut { id: _, addr, len } => {
-                assert_eq!(data.len(), len, "write data phase length");
-                let off = Self::offset(addr, len).unwrap();
-                for (i, &b) in data.iter().enumerate() {
-                    // NOR flash: programming can only clear bits.
-                    self.flash[off + i] &= b;
-                }
-                if let Some(a) = self.flip_bit_at
-                    && let Some(o) = Self::offset(a, 1).filter(|&o| o >= off && o < off + len)
-                {
-                    self.flash[o] ^= 0x10;
-                }
-                self.phase = Phase::AckIn;
-                Ok(len)
+        match self.0.bulk_out(data) {
+            Ok(n) => {
+                assert_eq!(n, data.len());
+                Ok(n)
             }
-            Phase::AckOut => {
-                assert!(data.is_empty(), "ack of an IN command is a zero-length OUT");
-                Ok(0)
-            }
-            other => panic!("bulk OUT during {other:?}"),
+            Err(e) => stall(e),
         }
     }
 
     fn bulk_in(&mut self, len: usize) -> Result<Vec<u8>, PicobootError> {
-        match std::mem::replace(&mut self.phase, Phase::Command) {
-            Phase::AckIn => {
-                assert_eq!(len, 0);
-                Ok(Vec::new())
+        match self.0.bulk_in() {
+            Ok(data) => {
+                assert_eq!(data.len(), len, "the host reads exactly the data phase");
+                Ok(data)
             }
-            Phase::DataIn { addr, len: want } => {
-                assert_eq!(len, want);
-                let off = Self::offset(addr, want).unwrap();
-                self.phase = Phase::AckOut;
-                Ok(self.flash[off..off + want].to_vec())
-            }
-            other => panic!("bulk IN during {other:?}"),
+            Err(e) => stall(e),
         }
     }
 
     fn control_out(&mut self, rt: u8, req: u8, data: &[u8]) -> Result<(), PicobootError> {
         assert_eq!((rt, req, data.len()), (0x41, 0x41, 0), "INTERFACE_RESET");
-        self.phase = Phase::Command;
-        self.log.push(Logged::Reset);
+        self.0.interface_reset();
         Ok(())
     }
 
     fn control_in(&mut self, rt: u8, req: u8, len: usize) -> Result<Vec<u8>, PicobootError> {
         assert_eq!((rt, req, len), (0xC1, 0x42, 16), "GET_COMMAND_STATUS");
-        let mut s = vec![0u8; 16];
-        s[0..4].copy_from_slice(&self.last_token.unwrap_or(0).to_le_bytes());
-        s[4..8].copy_from_slice(&self.status.to_le_bytes());
-        Ok(s)
+        Ok(self.0.command_status().to_vec())
     }
 }
 
@@ -259,7 +111,7 @@ fn flash_sequence_erases_writes_verifies_and_reboots() {
         phases.push((phase.to_string(), done, total))
     })
     .unwrap();
-    let dev = pb.into_transport();
+    let dev = pb.into_transport().0;
     let cmds: Vec<(u8, Vec<u8>)> = dev
         .log
         .iter()
@@ -293,7 +145,14 @@ fn flash_sequence_erases_writes_verifies_and_reboots() {
             .concat()
         )
     );
-    assert_eq!(dev.rebooted, Some((0, 0x2004_2000, 500)));
+    assert_eq!(
+        dev.rebooted,
+        Some(Reboot {
+            pc: 0,
+            sp: 0x2004_2000,
+            delay_ms: 500
+        })
+    );
     // Flash now holds the image; erased-but-unwritten bytes are 0xFF; others untouched.
     assert_eq!(&dev.flash[..5000], &img.bytes(RP2040_FLASH_START, 5000)[..]);
     assert!(dev.flash[5120..0x2000].iter().all(|&b| b == 0xFF));
@@ -312,7 +171,7 @@ fn flash_sequence_erases_writes_verifies_and_reboots() {
 #[test]
 fn a_bad_flash_cell_is_caught_by_read_back() {
     let mut dev = SimBootrom::new();
-    dev.flip_bit_at = Some(RP2040_FLASH_START + 0x1_0105);
+    dev.0.faults.flip_bit_at = Some(RP2040_FLASH_START + 0x1_0105);
     let mut pb = Picoboot::new(dev);
     let err = pb.flash_image(&image(), &mut |_, _, _| {}).unwrap_err();
     match err {
@@ -320,7 +179,7 @@ fn a_bad_flash_cell_is_caught_by_read_back() {
         other => panic!("expected a verify error, got {other}"),
     }
     assert!(
-        pb.into_transport().rebooted.is_none(),
+        pb.into_transport().0.rebooted.is_none(),
         "no reboot into a bad image"
     );
 }
@@ -328,7 +187,7 @@ fn a_bad_flash_cell_is_caught_by_read_back() {
 #[test]
 fn a_rejected_write_reports_the_device_status() {
     let mut dev = SimBootrom::new();
-    dev.fail_write = Some((2, 4));
+    dev.0.faults.fail_write = Some((2, 4));
     let mut pb = Picoboot::new(dev);
     let err = pb.flash_image(&image(), &mut |_, _, _| {}).unwrap_err();
     let msg = err.to_string();
@@ -343,4 +202,134 @@ fn a_rejected_write_reports_the_device_status() {
         "{msg}"
     );
     assert!(msg.contains("INVALID_ADDRESS"), "{msg}");
+}
+
+/// The boot ROM model directly: what it enforces, transfer by transfer.
+mod model {
+    use super::*;
+    use usb::bootrom::{Expect, ProtocolViolation};
+
+    fn erased() -> BootRom {
+        BootRom::new(vec![0xFF; 64 * 1024])
+    }
+
+    fn cmd(rom: &mut BootRom, token: u32, id: u8, args: &[u8], transfer: u32) {
+        assert_eq!(
+            rom.bulk_out(&command_packet(token, id, args, transfer)),
+            Ok(32)
+        );
+    }
+
+    fn ack_in(rom: &mut BootRom) {
+        assert_eq!(rom.expect(), Expect::In);
+        assert_eq!(rom.bulk_in(), Ok(Vec::new()));
+        assert_eq!(rom.expect(), Expect::Out(32));
+    }
+
+    fn unlocked() -> BootRom {
+        let mut rom = erased();
+        cmd(&mut rom, 1, 0x01, &[2], 0);
+        ack_in(&mut rom);
+        cmd(&mut rom, 2, 0x06, &[], 0);
+        ack_in(&mut rom);
+        rom
+    }
+
+    #[test]
+    fn writes_only_clear_bits_and_data_may_come_in_pieces() {
+        let mut rom = unlocked();
+        cmd(&mut rom, 3, 0x05, &addr_size(0x1000_0000, 512), 512);
+        assert_eq!(rom.expect(), Expect::Out(512));
+        assert_eq!(rom.bulk_out(&[0x0F; 256]), Ok(256));
+        assert_eq!(rom.expect(), Expect::Out(256));
+        assert_eq!(rom.bulk_out(&[0xAA; 256]), Ok(256));
+        ack_in(&mut rom);
+        // the same page again without an erase: old AND new
+        cmd(&mut rom, 4, 0x05, &addr_size(0x1000_0000, 256), 256);
+        assert_eq!(rom.bulk_out(&[0xF3; 256]), Ok(256));
+        ack_in(&mut rom);
+        assert_eq!(rom.flash[0], 0x03);
+        assert_eq!(rom.flash[256], 0xAA);
+        // READ: data, then a zero-length OUT
+        cmd(&mut rom, 5, 0x84, &addr_size(0x1000_0100, 4), 4);
+        assert_eq!(rom.bulk_in(), Ok(vec![0xAA; 4]));
+        assert_eq!(rom.expect(), Expect::Out(0));
+        assert_eq!(rom.bulk_out(&[]), Ok(0));
+        // erase sets whole sectors to 0xFF
+        cmd(&mut rom, 6, 0x03, &addr_size(0x1000_0000, 4096), 0);
+        ack_in(&mut rom);
+        assert!(rom.flash[..4096].iter().all(|&b| b == 0xFF));
+    }
+
+    #[test]
+    fn failures_are_statuses_and_broken_sequences_violations() {
+        let mut rom = erased();
+        let erase = addr_size(0x1000_0000, 4096);
+        assert_eq!(
+            rom.bulk_out(&command_packet(1, 0x03, &erase, 0)),
+            Err(BootRomError::Protocol(ProtocolViolation::NotExclusive(
+                0x03
+            )))
+        );
+        let mut rom = unlocked();
+        assert_eq!(
+            rom.bulk_out(&command_packet(3, 0x03, &addr_size(0x1000_0100, 4096), 0)),
+            Err(BootRomError::Status(5)),
+            "erase off a sector boundary: BAD_ALIGNMENT"
+        );
+        let status = rom.command_status();
+        assert_eq!(&status[0..4], &3u32.to_le_bytes(), "dToken");
+        assert_eq!(&status[4..8], &5u32.to_le_bytes(), "dStatusCode");
+        assert_eq!(status[8], 0x03, "bCmdId");
+        assert_eq!(
+            rom.bulk_out(&command_packet(4, 0x05, &addr_size(0x1000_0000, 100), 100)),
+            Err(BootRomError::Status(5)),
+            "write of a partial page"
+        );
+        assert_eq!(
+            rom.bulk_out(&command_packet(5, 0x05, &addr_size(0x1001_0000, 256), 256)),
+            Err(BootRomError::Status(4)),
+            "beyond the 64 KiB flash: INVALID_ADDRESS"
+        );
+        assert_eq!(
+            rom.bulk_out(&command_packet(6, 0x05, &addr_size(0x1000_0000, 256), 0)),
+            Err(BootRomError::Status(3)),
+            "dTransferLength differs from the size"
+        );
+        assert_eq!(
+            rom.bulk_out(&command_packet(7, 0x03, &[0; 4], 0)),
+            Err(BootRomError::Status(2)),
+            "bCmdSize 4 for an erase"
+        );
+        assert_eq!(
+            rom.bulk_out(&command_packet(8, 0x7F, &[], 0)),
+            Err(BootRomError::Status(1))
+        );
+        let mut bad_magic = command_packet(9, 0x06, &[], 0);
+        bad_magic[0] ^= 1;
+        assert!(matches!(
+            rom.bulk_out(&bad_magic),
+            Err(BootRomError::Protocol(ProtocolViolation::Magic(_)))
+        ));
+        cmd(&mut rom, 10, 0x06, &[], 0);
+        assert_eq!(
+            rom.bulk_out(&command_packet(11, 0x06, &[], 0)),
+            Err(BootRomError::Protocol(ProtocolViolation::UnexpectedOut {
+                got: 32,
+                phase: usb::bootrom::Phase::AckIn
+            })),
+            "a new command before the acknowledgement"
+        );
+        assert_eq!(
+            rom.expect(),
+            Expect::In,
+            "still waiting for the acknowledgement"
+        );
+        rom.interface_reset();
+        assert_eq!(
+            rom.bulk_out(&command_packet(10, 0x06, &[], 0)),
+            Err(BootRomError::Protocol(ProtocolViolation::TokenRepeated(10))),
+        );
+        assert_eq!(rom.log.last(), Some(&Logged::Reset));
+    }
 }

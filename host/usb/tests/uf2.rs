@@ -168,3 +168,81 @@ fn bad_inputs_are_clear_errors() {
         Err(Uf2Error::BadBlock { index: 0, .. })
     ));
 }
+
+/// A UF2 file read back: the same image; cut short, another family's, or a page outside
+/// flash: refused before anything would be written.
+#[test]
+fn uf2_files_are_read_back_and_checked() {
+    let img = FlashImage::from_segments(&[
+        LoadSegment {
+            paddr: 0x1000_0000,
+            data: boot2(),
+        },
+        LoadSegment {
+            paddr: 0x1000_1000,
+            data: (0..700u32).map(|i| (i % 251) as u8).collect(),
+        },
+    ])
+    .unwrap();
+    let uf2 = img.to_uf2();
+    assert_eq!(uf2.len(), 4 * 512);
+    assert_eq!(FlashImage::from_uf2(&uf2), Ok(img.clone()));
+
+    assert_eq!(
+        FlashImage::from_uf2(&uf2[..3 * 512]),
+        Err(Uf2Error::MissingBlocks { have: 3, want: 4 })
+    );
+    let mut repeated = uf2.clone();
+    repeated.copy_within(..512, 512); // block 0 twice, block 1 missing
+    assert!(matches!(
+        FlashImage::from_uf2(&repeated),
+        Err(Uf2Error::BadBlock { index: 1, .. })
+    ));
+    assert!(matches!(
+        FlashImage::from_uf2(&uf2[..1000]),
+        Err(Uf2Error::BadBlock { .. })
+    ));
+
+    let mut other_family = uf2.clone();
+    other_family[512 + 28..512 + 32].copy_from_slice(&0xADA5_2840u32.to_le_bytes());
+    let err = FlashImage::from_uf2(&other_family).unwrap_err();
+    assert_eq!(
+        err,
+        Uf2Error::Family {
+            index: 1,
+            family: Some(0xADA5_2840)
+        }
+    );
+    assert!(err.to_string().contains("0xada52840"), "{err}");
+    let mut no_family = uf2.clone();
+    no_family[8..12].copy_from_slice(&0u32.to_le_bytes());
+    assert_eq!(
+        FlashImage::from_uf2(&no_family),
+        Err(Uf2Error::Family {
+            index: 0,
+            family: None
+        })
+    );
+
+    let mut in_ram = uf2.clone();
+    in_ram[12..16].copy_from_slice(&0x2000_0000u32.to_le_bytes());
+    assert!(matches!(
+        FlashImage::from_uf2(&in_ram),
+        Err(Uf2Error::NotInFlash {
+            paddr: 0x2000_0000,
+            ..
+        })
+    ));
+    let mut unaligned = uf2.clone();
+    unaligned[12..16].copy_from_slice(&0x1000_0080u32.to_le_bytes());
+    assert!(matches!(
+        FlashImage::from_uf2(&unaligned),
+        Err(Uf2Error::BadBlock { index: 0, .. })
+    ));
+    let mut same_page = uf2;
+    same_page[512 + 12..512 + 16].copy_from_slice(&0x1000_0000u32.to_le_bytes());
+    assert_eq!(
+        FlashImage::from_uf2(&same_page),
+        Err(Uf2Error::Overlap(0x1000_0000))
+    );
+}

@@ -1,4 +1,5 @@
-//! `tactile flash FIRMWARE.elf [--uf2-out FILE]`: ELF -> UF2, or flashing over PICOBOOT.
+//! `tactile flash FIRMWARE [--uf2-out FILE]`: ELF (or UF2) -> UF2, or flashing over
+//! PICOBOOT. The image is read and checked completely before any device is touched.
 
 use clap::Args;
 use std::path::PathBuf;
@@ -9,11 +10,11 @@ use usb::discovery::list_serial_ports;
 use usb::elf_image::load_segments;
 use usb::picoboot::Picoboot;
 use usb::rusb_transport::RusbPicoboot;
-use usb::uf2::FlashImage;
+use usb::uf2::{FlashImage, UF2_MAGIC_START0, UF2_MAGIC_START1};
 
 #[derive(Debug, Args)]
 pub struct FlashArgs {
-    /// The firmware ELF (firmware/rp2040 build output).
+    /// The firmware: the ELF of the firmware/rp2040 build, or a UF2 file for the RP2040.
     pub firmware: PathBuf,
     /// Only write the UF2 file (copy it to the RPI-RP2 drive to flash).
     #[arg(long)]
@@ -32,7 +33,7 @@ pub fn run(args: FlashArgs) -> ExitCode {
     let elf = match fem_core::input_file::read_limited(
         &args.firmware,
         MAX_FIRMWARE_FILE_BYTES,
-        "a firmware ELF",
+        "a firmware image",
     ) {
         Ok(b) => b,
         Err(e) => {
@@ -40,10 +41,17 @@ pub fn run(args: FlashArgs) -> ExitCode {
             return ExitCode::from(2);
         }
     };
-    let image = match load_segments(&elf)
-        .map_err(|e| e.to_string())
-        .and_then(|s| FlashImage::from_segments(&s).map_err(|e| e.to_string()))
-    {
+    let is_uf2 = elf.len() >= 8
+        && elf[0..4] == UF2_MAGIC_START0.to_le_bytes()
+        && elf[4..8] == UF2_MAGIC_START1.to_le_bytes();
+    let image = if is_uf2 {
+        FlashImage::from_uf2(&elf).map_err(|e| e.to_string())
+    } else {
+        load_segments(&elf)
+            .map_err(|e| e.to_string())
+            .and_then(|s| FlashImage::from_segments(&s).map_err(|e| e.to_string()))
+    };
+    let image = match image {
         Ok(i) => i,
         Err(e) => {
             eprintln!("error: {path}: {e}");
