@@ -629,6 +629,38 @@ case_measure() {
     awk "BEGIN { exit !($e2 > 190 && $e2 < 210) }"
 }
 
+# The daemon on the real drivers: `tactile daemon --port /dev/ttyACMn --camera /dev/video0`
+# with the calibrations above in its records' calibrations folder, an experiment submitted
+# and followed by `tactile run`; the modulus as in `measure`.
+case_daemon_measures() {
+    hilsim_start --scenario /tmp/measure.toml --camera-out /dev/video1 || return 1
+    port=$(acm_port)
+    mkdir -p /tmp/drecords/calibrations
+    cp "$(ls /tmp/cal/calibration-*.json | tail -n 1)" /tmp/drecords/calibrations/ || return 1
+    tactile daemon --port "$port" --camera /dev/video0 --records /tmp/drecords \
+        --token-file /tmp/dm.token --lut /data/default.lut >/tmp/dm.log 2>&1 &
+    daemon_pid=$!
+    i=0
+    until tactile status --token-file /tmp/dm.token --json 2>&1 | grep -q '"connected": true'; do
+        i=$((i + 1))
+        [ "$i" -gt 120 ] && { cat /tmp/dm.log; kill "$daemon_pid"; return 1; }
+        sleep 0.5
+    done
+    # as in `measure`: 0.25 mm/s, two indentations
+    timeout 600 tactile run --token-file /tmp/dm.token --pressure 6 --start 0.8 --speed 0.25 \
+        --repeats 2 >/tmp/drun.txt 2>&1
+    rc=$?
+    kill "$daemon_pid"
+    wait "$daemon_pid" 2>/dev/null
+    hilsim_stop
+    cat /tmp/drun.txt
+    [ "$rc" -eq 0 ] || { tail -n 20 /tmp/dm.log; return 1; }
+    e2=$(sed -n 's/^E2 = \([0-9.]*\) kPa.*/\1/p' /tmp/drun.txt | head -n 1)
+    [ -n "$e2" ] || return 1
+    detail "$(grep '^E2 =' /tmp/drun.txt | head -n 1 | cut -c1-120) (simulated 200 kPa)"
+    awk "BEGIN { exit !($e2 > 190 && $e2 < 210) }"
+}
+
 # How fast hil-sim simulates here (a bench must keep up with real time): 5 s of the
 # default bench without a host, with and without rendering frames.
 case_hilsim_speed() {
@@ -654,6 +686,7 @@ run calibrate_rigid
 run calibrate_camera
 run camera_latency
 run measure
+run daemon_measures
 run camera_unplugged
 hilsim_stop
 bootrom_stop

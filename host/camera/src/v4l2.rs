@@ -3,10 +3,13 @@
 //!
 //! - Device selection: a path (`/dev/video2`) or the first capture device; a missing device
 //!   is an error listing the `/dev/video*` nodes that exist.
-//! - Format negotiation: the preferred format is requested, then the format the driver
-//!   actually chose is read back and mapped ([`pixel_format_from_fourcc`]); a driver that
-//!   silently substitutes YUYV for MJPEG is handled, one we cannot decode is an error naming
-//!   its FourCC. If the driver rejects the request outright, MJPG, YUYV and GREY are tried.
+//! - Format negotiation: the preferred format is requested (by default the one the device
+//!   is already set to, if it can be decoded: a camera's default, or what `v4l2-ctl` or
+//!   another program chose, such as the format a video loop runs in), then the format the
+//!   driver actually chose is read back and mapped ([`pixel_format_from_fourcc`]); a driver
+//!   that silently substitutes YUYV for MJPEG is handled, one we cannot decode is an error
+//!   naming its FourCC. If the driver rejects the request outright, MJPG, YUYV and GREY are
+//!   tried.
 //! - Memory-mapped streaming ([`v4l2_mmap::MmapCapture`], [`CAPTURE_BUFFERS`] buffers).
 //! - Exposure and white balance are switched to manual where the camera offers the
 //!   controls, so the contact contrast does not drift with auto-exposure.
@@ -43,7 +46,9 @@ pub struct V4l2Config {
     pub device: Option<PathBuf>,
     pub width: u32,
     pub height: u32,
-    pub preferred: PixelFormat,
+    /// The format to ask for first; `None`: the one the device is set to already (by
+    /// `v4l2-ctl`, another program, or the camera's default) if it can be decoded.
+    pub preferred: Option<PixelFormat>,
     /// Switch auto exposure and auto white balance off where offered.
     pub lock_exposure: bool,
 }
@@ -54,7 +59,7 @@ impl Default for V4l2Config {
             device: None,
             width: 640,
             height: 480,
-            preferred: PixelFormat::Mjpeg,
+            preferred: None,
             lock_exposure: true,
         }
     }
@@ -194,7 +199,16 @@ impl V4l2Source {
             message,
         };
         let mut locked = Vec::new();
-        let mut order = vec![config.preferred];
+        let current = || {
+            let device = linuxvideo::Device::open(path).ok()?;
+            match device.format(linuxvideo::BufType::VIDEO_CAPTURE).ok()? {
+                linuxvideo::format::Format::VideoCapture(f) => {
+                    pixel_format_from_fourcc(f.pixel_format().as_fourcc())
+                }
+                _ => None,
+            }
+        };
+        let mut order: Vec<PixelFormat> = config.preferred.or_else(current).into_iter().collect();
         for f in [PixelFormat::Mjpeg, PixelFormat::Yuyv, PixelFormat::Gray8] {
             if !order.contains(&f) {
                 order.push(f);

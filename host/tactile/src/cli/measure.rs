@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Duration;
 
-use camera::{PixelFormat, V4l2Config, V4l2Source};
+use camera::{V4l2Config, V4l2Source};
 use experiment::IndentationPlan;
 use experiment::calibration::{CalibrationRecord, load_latest, load_record};
 use experiment::camera_radius::{CameraRadiusSource, capture_reference};
@@ -173,7 +173,6 @@ pub fn run(args: MeasureArgs) -> ExitCode {
     let make_radius = |_link: &mut Link, px| {
         let mut source = V4l2Source::open(&V4l2Config {
             device: Some(camera.clone()),
-            preferred: PixelFormat::Gray8,
             ..V4l2Config::default()
         })
         .map_err(|e| e.to_string())?;
