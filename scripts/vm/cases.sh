@@ -633,6 +633,7 @@ case_measure() {
 # with the calibrations above in its records' calibrations folder, an experiment submitted
 # and followed by `tactile run`; the modulus as in `measure`.
 case_daemon_measures() {
+    [ -e /tmp/measure.toml ] || printf 'name = "vm-measure"\n[camera]\nfps = 30.0\n' >/tmp/measure.toml
     hilsim_start --scenario /tmp/measure.toml --camera-out /dev/video1 || return 1
     port=$(acm_port)
     mkdir -p /tmp/drecords/calibrations
@@ -650,14 +651,46 @@ case_daemon_measures() {
     timeout 600 tactile run --token-file /tmp/dm.token --pressure 6 --start 0.8 --speed 0.25 \
         --repeats 2 >/tmp/drun.txt 2>&1
     rc=$?
+    cat /tmp/drun.txt
+    [ "$rc" -eq 0 ] || { kill "$daemon_pid"; tail -n 20 /tmp/dm.log; return 1; }
+    e2=$(sed -n 's/^E2 = \([0-9.]*\) kPa.*/\1/p' /tmp/drun.txt | head -n 1)
+    [ -n "$e2" ] || { kill "$daemon_pid"; return 1; }
+    # A second run with the cable pulled during its first indentation and plugged back in
+    # 2 s later: the run ends with a partial record that says so, and the daemon finds the
+    # controller again by its USB serial number.
+    timeout 600 tactile run --token-file /tmp/dm.token --pressure 6 --start 0.8 --speed 0.25 \
+        --repeats 2 >/tmp/drun2.txt 2>&1 &
+    run_pid=$!
+    i=0
+    until grep -q "indentation 1/2" /tmp/drun2.txt; do
+        i=$((i + 1))
+        [ "$i" -gt 600 ] && { cat /tmp/drun2.txt; kill "$daemon_pid" "$run_pid"; return 1; }
+        sleep 0.2
+    done
+    sleep 2
+    unplug
+    sleep 2
+    plug
+    wait "$run_pid"
+    cat /tmp/drun2.txt
+    i=0
+    until tactile status --token-file /tmp/dm.token --json >/tmp/dm-status.json 2>&1 &&
+        grep -q '"connected": true' /tmp/dm-status.json && grep -q '"port_after": "/dev/tty' /tmp/dm-status.json; do
+        i=$((i + 1))
+        [ "$i" -gt 120 ] && { cat /tmp/dm-status.json; tail -n 20 /tmp/dm.log; kill "$daemon_pid"; return 1; }
+        sleep 0.5
+    done
     kill "$daemon_pid"
     wait "$daemon_pid" 2>/dev/null
     hilsim_stop
-    cat /tmp/drun.txt
-    [ "$rc" -eq 0 ] || { tail -n 20 /tmp/dm.log; return 1; }
-    e2=$(sed -n 's/^E2 = \([0-9.]*\) kPa.*/\1/p' /tmp/drun.txt | head -n 1)
-    [ -n "$e2" ] || return 1
-    detail "$(grep '^E2 =' /tmp/drun.txt | head -n 1 | cut -c1-120) (simulated 200 kPa)"
+    sed -n '/"gaps"/,/]/p' /tmp/dm-status.json
+    grep -q 'Partial' /tmp/drun2.txt || return 1
+    meta=$(ls -d /tmp/drecords/*job2*/meta.json 2>/dev/null | head -n 1)
+    [ -n "$meta" ] || { ls /tmp/drecords; return 1; }
+    grep '"status"' -A 2 "$meta"
+    grep -q -i 'partial' "$meta" || return 1
+    gap=$(sed -n 's/.*"gap_s": *\([0-9.]*\).*/\1/p' /tmp/dm-status.json | head -n 1)
+    detail "$(grep '^E2 =' /tmp/drun.txt | head -n 1 | cut -c1-80) (simulated 200 kPa); unplugged mid-run: partial record $(basename "$(dirname "$meta")"), reconnected after ${gap} s"
     awk "BEGIN { exit !($e2 > 190 && $e2 < 210) }"
 }
 
