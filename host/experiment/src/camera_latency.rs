@@ -268,7 +268,7 @@ fn cycle_latency(
     let offset = (0..GRID)
         .map(|i| {
             let x = -1.0 + 2.0 * i as f64 / (GRID - 1) as f64;
-            polyval(&fit_load, x) - polyval(&fit_unload, x)
+            fit_load.at(x) - fit_unload.at(x)
         })
         .sum::<f64>()
         / GRID as f64;
@@ -278,16 +278,31 @@ fn cycle_latency(
 /// Least-squares du_s/dt of a branch (mm/s).
 fn speed(b: &[CurvePoint]) -> Option<f64> {
     let line = polyfit::<2>(&b.iter().map(|p| (p.t_s, p.u_s_mm)).collect::<Vec<_>>())?;
-    Some(line[1])
+    Some(line.c[1])
 }
 
-/// Least-squares polynomial with `N` coefficients (lowest order first), from the normal
-/// equations solved by Gaussian elimination with partial pivoting; `None` if singular.
-fn polyfit<const N: usize>(xy: &[(f64, f64)]) -> Option<[f64; N]> {
+/// A polynomial in `x - x0` (lowest order first); centred for conditioning.
+#[derive(Debug, Clone, Copy)]
+struct Poly<const N: usize> {
+    x0: f64,
+    c: [f64; N],
+}
+
+impl<const N: usize> Poly<N> {
+    fn at(&self, x: f64) -> f64 {
+        self.c
+            .iter()
+            .rev()
+            .fold(0.0, |acc, k| acc * (x - self.x0) + k)
+    }
+}
+
+/// Least-squares polynomial with `N` coefficients about the mean of x, from the normal
+/// equations; `None` if singular.
+fn polyfit<const N: usize>(xy: &[(f64, f64)]) -> Option<Poly<N>> {
     if xy.len() < N {
         return None;
     }
-    // centre x for conditioning (t in seconds since the start of a run)
     let x0 = xy.iter().map(|(x, _)| x).sum::<f64>() / xy.len() as f64;
     let mut m = [[0.0; N]; N];
     let mut r = [0.0; N];
@@ -296,57 +311,15 @@ fn polyfit<const N: usize>(xy: &[(f64, f64)]) -> Option<[f64; N]> {
         for k in 1..N {
             pow[k] = pow[k - 1] * (x - x0);
         }
-        for i in 0..N {
-            r[i] += pow[i] * y;
-            for j in 0..N {
-                m[i][j] += pow[i] * pow[j];
+        for (i, pi) in pow.iter().enumerate() {
+            r[i] += pi * y;
+            for (mij, pj) in m[i].iter_mut().zip(&pow) {
+                *mij += pi * pj;
             }
         }
     }
-    for col in 0..N {
-        let pivot = (col..N).max_by(|&a, &b| m[a][col].abs().total_cmp(&m[b][col].abs()))?;
-        if m[pivot][col].abs() < 1e-300 {
-            return None;
-        }
-        m.swap(col, pivot);
-        r.swap(col, pivot);
-        for row in col + 1..N {
-            let f = m[row][col] / m[col][col];
-            let pivot_row = m[col];
-            for (v, p) in m[row].iter_mut().zip(pivot_row).skip(col) {
-                *v -= f * p;
-            }
-            r[row] -= f * r[col];
-        }
-    }
-    let mut c = [0.0; N];
-    for i in (0..N).rev() {
-        let s: f64 = (i + 1..N).map(|k| m[i][k] * c[k]).sum();
-        c[i] = (r[i] - s) / m[i][i];
-    }
-    // back from powers of (x - x0) to powers of x: only needed for N = 2 (a slope is
-    // unchanged by the shift), and the cubic is evaluated in its own centred variable
-    Some(shift_origin(c, x0))
-}
-
-/// Coefficients of p(x - x0) as a polynomial in x.
-fn shift_origin<const N: usize>(c: [f64; N], x0: f64) -> [f64; N] {
-    let mut out = [0.0; N];
-    // p(x) = sum_k c_k (x - x0)^k = sum_k c_k sum_j C(k,j) x^j (-x0)^(k-j)
-    for (k, ck) in c.iter().enumerate() {
-        let mut binom = 1.0;
-        for (j, o) in out.iter_mut().enumerate().take(k + 1) {
-            if j > 0 {
-                binom = binom * (k + 1 - j) as f64 / j as f64;
-            }
-            *o += ck * binom * (-x0).powi((k - j) as i32);
-        }
-    }
-    out
-}
-
-fn polyval(c: &[f64], x: f64) -> f64 {
-    c.iter().rev().fold(0.0, |acc, k| acc * x + k)
+    let c = vision::linear_solve::solve(m, r)?;
+    Some(Poly { x0, c })
 }
 
 fn median(v: &[f64]) -> f64 {
@@ -472,17 +445,26 @@ mod tests {
     }
 
     #[test]
-    fn polynomial_fit_and_origin_shift() {
+    fn centred_polynomial_fit_reproduces_an_exact_parabola() {
+        // far from the origin, as times in seconds of a run are
+        let y = |x: f64| 2.0 - 3.0 * x + 0.5 * x * x;
         let xy: Vec<(f64, f64)> = (0..20)
             .map(|i| {
                 let x = 100.0 + f64::from(i) * 0.1;
-                (x, 2.0 - 3.0 * x + 0.5 * x * x)
+                (x, y(x))
             })
             .collect();
-        let c = polyfit::<3>(&xy).unwrap();
-        assert!(
-            (c[0] - 2.0).abs() < 1e-6 && (c[1] + 3.0).abs() < 1e-8 && (c[2] - 0.5).abs() < 1e-10,
-            "{c:?}"
-        );
+        let p = polyfit::<3>(&xy).unwrap();
+        for x in [100.0, 100.55, 101.9] {
+            assert!(
+                (p.at(x) - y(x)).abs() < 1e-8,
+                "{x}: {} vs {}",
+                p.at(x),
+                y(x)
+            );
+        }
+        // dy/dx at the centre x0 = 100.95: -3 + x0
+        assert!((p.c[1] - (-3.0 + p.x0)).abs() < 1e-8, "{p:?}");
+        assert!(polyfit::<3>(&xy[..2]).is_none());
     }
 }
