@@ -252,11 +252,17 @@ impl RadiusSource for SimRadiusSource<'_> {
 }
 
 /// Waits for a no-contact reference frame (the newest one after `settle`).
+///
+/// Frames still queued were rendered before the caller's last commands took effect: the
+/// queue keeps the oldest frames when nobody reads it (as a capture queue does), so on a
+/// busy host it can hold nothing but frames from before the LED was switched on or the
+/// shell inflated. They are dropped first; the reference is rendered after them.
 pub fn reference_frame(
     link: &mut Link,
     bench: &BenchHandle,
     settle: Duration,
 ) -> Result<GrayImage, SimRunError> {
+    while bench.frames.try_recv().is_ok() {}
     link.receive_for(settle)?;
     let mut newest = None;
     while let Ok(f) = bench.frames.try_recv() {
