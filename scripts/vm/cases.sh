@@ -467,6 +467,68 @@ TOML
         exit !(hi - lo < 0.5 && $r > lo - 1 && $r < hi + 1) }"
 }
 
+# tactile's own capture through the driver in another format: vivid's loop in YUYV (the
+# format of a UVC camera's uncompressed stream) and `tactile radius --camera` reading live
+# frames from it, first with the format the device is set to, then asking for MJPEG, which
+# vivid does not offer (the driver substitutes YUYV and tactile decodes what it chose).
+# The contact radius after the scenario's indentation against the radius hil-sim rendered,
+# the driver's sequence numbers and timestamps increasing.
+case_camera_formats() {
+    cat >/tmp/frames-yuyv.toml <<'TOML'
+name = "vm-frames-yuyv"
+duration_s = 60.0
+[camera]
+fps = 30.0
+format = "yuyv"
+[[programme]]
+at_s = 0.0
+request = { SetLed = { duty_per_10k = 10000 } }
+[[programme]]
+at_s = 0.0
+request = { SetPressure = { setpoint_kpa = 6.0 } }
+[[programme]]
+at_s = 6.0
+indent_to_mm = 1.5
+speed_mm_per_s = 1.0
+TOML
+    v4l2-ctl -d /dev/video0 --set-fmt-video=width=640,height=480,pixelformat=YUYV || return 1
+    v4l2-ctl -d /dev/video0 --get-fmt-video | grep -q YUYV || return 1
+    hilsim_start --scenario /tmp/frames-yuyv.toml --camera-out /dev/video1 --pacing realtime \
+        --camera-truth /tmp/truth-yuyv.csv || return 1
+    # The first frame (the reference) a few seconds before the indentation starts at 6 s;
+    # 12 s of frames from there reach past the indentation's end at 7.5 s and its settling
+    # (measuring takes ~45 ms a frame under emulation, so the driver drops frames between).
+    timeout 300 tactile radius --camera /dev/video0 --seconds 12 --json \
+        >/tmp/live.json 2>/tmp/live.err || { cat /tmp/live.err; return 1; }
+    truth=$(tail -n 1 /tmp/truth-yuyv.csv | cut -d, -f3)
+    # asking for a format the driver does not offer
+    timeout 60 tactile radius --camera /dev/video0 --format mjpeg --count 5 --json \
+        >/tmp/live-mjpeg.json 2>/tmp/live-mjpeg.err || { cat /tmp/live-mjpeg.err; return 1; }
+    hilsim_stop
+    v4l2-ctl -d /dev/video0 --set-fmt-video=width=640,height=480,pixelformat=GREY || return 1
+    cat /tmp/live.err /tmp/live-mjpeg.err
+    grep -q 'Yuyv 640x480$' /tmp/live.err || return 1
+    grep -q 'Yuyv 640x480 (asked for Mjpeg' /tmp/live-mjpeg.err || return 1
+    [ "$(grep -o '"pixel_format":"Yuyv"' /tmp/live-mjpeg.json | wc -l)" -eq 5 ] || return 1
+    # one row per frame: contact, radius, driver timestamp, format, driver sequence (the
+    # keys of a row are in alphabetical order, "sequence" last)
+    tr ',' '\n' </tmp/live.json | awk -F: '/"contact":/ { c = $2 } /"radius_px":/ { r = $2 }
+        /"host_time_us":/ { t = $2 } /"pixel_format":/ { f = $2; gsub(/"/, "", f) }
+        /"sequence":/ { s = $2; gsub(/[^0-9]/, "", s); print c, r, t, f, s }' >/tmp/live.rows
+    awk 'NR % 20 == 1' /tmp/live.rows
+    rows=$(wc -l </tmp/live.rows)
+    [ "$rows" -ge 30 ] || { echo "only $rows frames in 12 s"; return 1; }
+    r=$(tail -n 1 /tmp/live.rows | cut -d' ' -f2)
+    detail "$(head -n 1 /tmp/live.err | cut -c1-80); $rows frames, $(grep -c '^false' /tmp/live.rows) without contact, the last $r px (rendered $truth px); MJPEG asked, YUYV chosen"
+    awk '$4 != "Yuyv" { print "format", $4, "at row", NR; exit 1 }
+        NR > 1 && ($5 <= seq || $3 <= t) { print "sequence or time not increasing at row", NR; exit 1 }
+        { seq = $5; t = $3 }' /tmp/live.rows || return 1
+    # frames without contact before the indentation, then contact
+    head -n 1 /tmp/live.rows | grep -q '^false' || return 1
+    # the last frame within 1 px of the rendered radius, as in camera_frames
+    awk "BEGIN { exit !(\"$r\" != \"null\" && $r > $truth - 1 && $r < $truth + 1) }"
+}
+
 # One frame from vivid's capture node as a PGM file.
 grab() {
     v4l2-ctl -d /dev/video0 --stream-mmap --stream-count=1 --stream-to=/tmp/grab.raw || return 1
@@ -715,6 +777,7 @@ run calibrate_manometer
 run daemon_reconnects
 run vivid_loop
 run camera_frames
+run camera_formats
 run calibrate_rigid
 run calibrate_camera
 run camera_latency

@@ -103,6 +103,32 @@ fn bad_input_exits_with_code_2_naming_the_file() {
 }
 
 #[test]
+fn a_missing_camera_is_named_with_the_devices_that_exist() {
+    let out = tactile()
+        .args(["radius", "--camera", "/nonexistent/video9", "--count", "3"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("/nonexistent/video9") && err.contains("video devices present"),
+        "{err}"
+    );
+    // frames and a camera together are refused before anything is opened
+    let out = tactile()
+        .args(["radius", "frame.pgm", "--camera", "/dev/video0"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    // --count without --camera too
+    let out = tactile()
+        .args(["radius", "frame.pgm", "--count", "3"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+}
+
+#[test]
 fn devices_lists_without_panicking_where_usb_is_absent() {
     let out = tactile().args(["devices", "--json"]).output().unwrap();
     assert!(

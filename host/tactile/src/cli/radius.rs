@@ -1,13 +1,16 @@
 //! `tactile radius FRAME... [--reference REF] [--json]`: contact radius per frame.
 //!
 //! FRAME may be a PGM/PNG image, a directory of them, or a raw MJPEG stream file
-//! (`.mjpeg`, `.mjpg`, `.jpg`, `.jpeg`). Without `--reference`, the first frame is the
-//! no-contact reference (record the probe in the air first). Prints, per frame,
-//! `radius_px`, `center_px`, `ellipse`, `quality`, `contact`, and the time per frame on
-//! stderr.
+//! (`.mjpeg`, `.mjpg`, `.jpg`, `.jpeg`); or, with `--camera DEV --count N`, N live frames
+//! from a V4L2 camera (the format negotiated as `tactile measure` does, or `--format`),
+//! each with the driver's sequence number and timestamp. Without `--reference`, the first
+//! frame is the no-contact reference (record the probe in the air first). Prints, per
+//! frame, `radius_px`, `center_px`, `ellipse`, `quality`, `contact`, and the time per frame
+//! on stderr.
 
 use camera::{
-    CameraError, Frame, FrameDirSource, FrameSource, GrayImage, MjpegFileSource, read_gray_image,
+    CameraError, Frame, FrameDirSource, FrameSource, GrayImage, MjpegFileSource, PixelFormat,
+    V4l2Config, V4l2Source, read_gray_image,
 };
 use clap::Args;
 use std::path::{Path, PathBuf};
@@ -18,14 +21,182 @@ use vision::{ContactRadius, ContactRadiusConfig, ContactRadiusEstimator};
 #[derive(Debug, Args)]
 pub struct RadiusArgs {
     /// Frames: PGM/PNG files, directories of them, or raw MJPEG stream files.
-    #[arg(required = true)]
+    #[arg(required_unless_present = "camera", conflicts_with = "camera")]
     pub frames: Vec<PathBuf>,
+    /// Live frames from this V4L2 camera (e.g. /dev/video0) instead of files.
+    #[arg(long, value_name = "DEV")]
+    pub camera: Option<PathBuf>,
+    /// With --camera: how many frames to measure (after the reference frame when there is
+    /// no --reference); default 30 unless --seconds is given.
+    #[arg(long, requires = "camera")]
+    pub count: Option<usize>,
+    /// With --camera: measure frames for this many seconds (and at most --count frames).
+    #[arg(long, requires = "camera")]
+    pub seconds: Option<f64>,
+    /// With --camera: the pixel format to ask for first (default: the one the device is
+    /// set to); the driver may choose another, which is reported.
+    #[arg(long, value_enum, requires = "camera")]
+    pub format: Option<FormatArg>,
     /// No-contact reference frame (PGM/PNG/JPEG); default: the first frame.
     #[arg(long)]
     pub reference: Option<PathBuf>,
     /// One JSON array on stdout instead of a table.
     #[arg(long)]
     pub json: bool,
+}
+
+/// Pixel formats that can be asked of a camera.
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+pub enum FormatArg {
+    Grey,
+    Yuyv,
+    Mjpeg,
+}
+
+impl From<FormatArg> for PixelFormat {
+    fn from(f: FormatArg) -> Self {
+        match f {
+            FormatArg::Grey => PixelFormat::Gray8,
+            FormatArg::Yuyv => PixelFormat::Yuyv,
+            FormatArg::Mjpeg => PixelFormat::Mjpeg,
+        }
+    }
+}
+
+/// One frame to measure: its label, luma plane and, for a live camera, what the driver
+/// said of it.
+struct LabelledFrame {
+    label: String,
+    image: GrayImage,
+    live: Option<LiveFrame>,
+}
+
+/// A live frame's pixel format, driver sequence number and timestamp (host clock).
+struct LiveFrame {
+    format: PixelFormat,
+    sequence: u64,
+    host_time_us: u64,
+}
+
+/// Where the frames come from: files read up front, or a camera read as it delivers.
+enum FrameFeed {
+    Files(std::vec::IntoIter<LabelledFrame>),
+    Camera {
+        source: Box<V4l2Source>,
+        device: PathBuf,
+        limit: CaptureLimit,
+    },
+}
+
+/// When a live capture stops: after `frames` frames or at `until`, whichever comes first.
+struct CaptureLimit {
+    frames: usize,
+    until: Option<Instant>,
+    /// The duration, started at the first frame (the reference, if it is taken live).
+    seconds: Option<f64>,
+}
+
+impl CaptureLimit {
+    /// `count` frames (30 without `count` or `seconds`) plus the reference frame when it is
+    /// taken from the camera, and at most `seconds`.
+    fn new(count: Option<usize>, seconds: Option<f64>, live_reference: bool) -> Self {
+        let frames = match (count, seconds) {
+            (Some(n), _) => n,
+            (None, Some(_)) => usize::MAX,
+            (None, None) => 30,
+        };
+        Self {
+            frames: frames.saturating_add(usize::from(live_reference)),
+            until: None,
+            seconds: seconds.filter(|s| s.is_finite() && *s >= 0.0),
+        }
+    }
+
+    /// Counts one frame; false once the capture is over.
+    fn take(&mut self) -> bool {
+        let now = Instant::now();
+        let until = *self.until.get_or_insert_with(|| {
+            now + std::time::Duration::from_secs_f64(self.seconds.unwrap_or(1e9))
+        });
+        if self.frames == 0 || now > until {
+            return false;
+        }
+        self.frames -= 1;
+        true
+    }
+}
+
+impl FrameFeed {
+    /// The camera at `device`, `count` frames; the negotiated format is reported on stderr.
+    fn camera(
+        device: &Path,
+        format: Option<FormatArg>,
+        limit: CaptureLimit,
+    ) -> Result<FrameFeed, CameraError> {
+        let source = V4l2Source::open(&V4l2Config {
+            device: Some(device.to_path_buf()),
+            preferred: format.map(PixelFormat::from),
+            ..V4l2Config::default()
+        })?;
+        let (negotiated, width, height) = source.format();
+        let asked = match format.map(PixelFormat::from) {
+            Some(asked) if asked != negotiated => {
+                format!(" (asked for {asked:?}; the driver chose another)")
+            }
+            _ => String::new(),
+        };
+        eprintln!(
+            "camera {}: {negotiated:?} {width}x{height}{asked}",
+            device.display()
+        );
+        Ok(FrameFeed::Camera {
+            source: Box::new(source),
+            device: device.to_path_buf(),
+            limit,
+        })
+    }
+
+    fn next(&mut self) -> Result<Option<LabelledFrame>, CameraError> {
+        match self {
+            FrameFeed::Files(frames) => Ok(frames.next()),
+            FrameFeed::Camera {
+                source,
+                device,
+                limit,
+            } => {
+                let Some(frame) = source.next_frame()? else {
+                    return Ok(None);
+                };
+                if !limit.take() {
+                    return Ok(None);
+                }
+                Ok(Some(LabelledFrame {
+                    label: format!("{}#{}", device.display(), frame.sequence),
+                    image: frame.luma()?,
+                    live: Some(LiveFrame {
+                        format: frame.format,
+                        sequence: frame.sequence,
+                        host_time_us: frame.host_time_us,
+                    }),
+                }))
+            }
+        }
+    }
+}
+
+fn read_reference(p: &Path) -> Result<GrayImage, CameraError> {
+    if is_mjpeg(p) {
+        let mut s = MjpegFileSource::open(p)?;
+        match s.next_frame()? {
+            Some(f) => Ok(f.luma()?),
+            None => Err(CameraError::BadFile {
+                path: p.to_path_buf(),
+                message: "no frame".to_string(),
+            }),
+        }
+    } else {
+        read_gray_image(p)
+    }
 }
 
 fn is_mjpeg(path: &Path) -> bool {
@@ -35,7 +206,7 @@ fn is_mjpeg(path: &Path) -> bool {
 }
 
 /// Every frame named on the command line, in order, with a label.
-fn load_frames(paths: &[PathBuf]) -> Result<Vec<(String, GrayImage)>, CameraError> {
+fn load_frames(paths: &[PathBuf]) -> Result<Vec<LabelledFrame>, CameraError> {
     let mut out = Vec::new();
     for path in paths {
         if path.is_dir() {
@@ -45,7 +216,11 @@ fn load_frames(paths: &[PathBuf]) -> Result<Vec<(String, GrayImage)>, CameraErro
             let mut src = MjpegFileSource::open(path)?;
             collect(&mut src, &path.display().to_string(), &mut out)?;
         } else {
-            out.push((path.display().to_string(), read_gray_image(path)?));
+            out.push(LabelledFrame {
+                label: path.display().to_string(),
+                image: read_gray_image(path)?,
+                live: None,
+            });
         }
     }
     Ok(out)
@@ -54,19 +229,23 @@ fn load_frames(paths: &[PathBuf]) -> Result<Vec<(String, GrayImage)>, CameraErro
 fn collect(
     src: &mut dyn FrameSource,
     label: &str,
-    out: &mut Vec<(String, GrayImage)>,
+    out: &mut Vec<LabelledFrame>,
 ) -> Result<(), CameraError> {
     while let Some(frame) = src.next_frame()? {
         let frame: Frame = frame;
-        out.push((format!("{label}#{}", frame.sequence), frame.luma()?));
+        out.push(LabelledFrame {
+            label: format!("{label}#{}", frame.sequence),
+            image: frame.luma()?,
+            live: None,
+        });
     }
     Ok(())
 }
 
-fn json_row(label: &str, m: &ContactRadius) -> serde_json::Value {
+fn json_row(frame: &LabelledFrame, m: &ContactRadius) -> serde_json::Value {
     let d = m.disc.as_ref();
-    serde_json::json!({
-        "frame": label,
+    let mut row = serde_json::json!({
+        "frame": frame.label,
         "contact": m.contact,
         "radius_px": d.map(|d| d.radius_px),
         "radius_sigma_px": d.map(|d| d.radius_sigma_px),
@@ -81,79 +260,89 @@ fn json_row(label: &str, m: &ContactRadius) -> serde_json::Value {
         "quality": m.quality,
         "contrast": d.map(|d| d.contrast),
         "edge_snr": d.map(|d| d.edge_snr),
-    })
+    });
+    if let (Some(live), Some(obj)) = (&frame.live, row.as_object_mut()) {
+        obj.insert("pixel_format".into(), serde_json::json!(live.format));
+        obj.insert("sequence".into(), serde_json::json!(live.sequence));
+        obj.insert("host_time_us".into(), serde_json::json!(live.host_time_us));
+    }
+    row
 }
 
 pub fn run(args: RadiusArgs) -> ExitCode {
-    let reference = match &args.reference {
-        Some(p) if is_mjpeg(p) => {
-            MjpegFileSource::open(p).and_then(|mut s| match s.next_frame()? {
-                Some(f) => Ok(f.luma()?),
-                None => Err(CameraError::BadFile {
-                    path: p.clone(),
-                    message: "no frame".to_string(),
-                }),
-            })
-        }
-        Some(p) => read_gray_image(p),
-        None => Err(CameraError::BadFile {
-            path: PathBuf::new(),
-            message: String::new(),
-        }),
+    let fail = |what: &str, e: &dyn std::fmt::Display| {
+        eprintln!("error: {what}{e}");
+        ExitCode::from(2)
     };
-    let frames = match load_frames(&args.frames) {
+    let reference = match args.reference.as_deref().map(read_reference).transpose() {
+        Ok(r) => r,
+        Err(e) => return fail("reference: ", &e),
+    };
+    let feed = match &args.camera {
+        Some(device) => FrameFeed::camera(
+            device,
+            args.format,
+            CaptureLimit::new(args.count, args.seconds, reference.is_none()),
+        ),
+        None => load_frames(&args.frames).map(|f| FrameFeed::Files(f.into_iter())),
+    };
+    let mut feed = match feed {
         Ok(f) => f,
-        Err(e) => {
-            eprintln!("error: {e}");
-            return ExitCode::from(2);
-        }
+        Err(e) => return fail("", &e),
     };
-    let reference = match (args.reference.is_some(), reference) {
-        (true, Ok(r)) => r,
-        (true, Err(e)) => {
-            eprintln!("error: reference: {e}");
-            return ExitCode::from(2);
-        }
-        (false, _) => match frames.first() {
-            Some((label, img)) => {
+    // Without --reference the first frame is the reference: a file is also measured (it
+    // reads "no contact"), a live frame is not counted.
+    let mut first_file = None;
+    let reference = match reference {
+        Some(r) => r,
+        None => match feed.next() {
+            Ok(Some(first)) => {
                 eprintln!(
-                    "note: no --reference; using the first frame ({label}) as the no-contact reference"
+                    "note: no --reference; using the first frame ({}) as the no-contact reference",
+                    first.label
                 );
-                img.clone()
+                let image = first.image.clone();
+                if matches!(feed, FrameFeed::Files(_)) {
+                    first_file = Some(first);
+                }
+                image
             }
-            None => {
-                eprintln!("error: no frames");
-                return ExitCode::from(2);
-            }
+            Ok(None) => return fail("", &"no frames"),
+            Err(e) => return fail("", &e),
         },
     };
     let estimator = match ContactRadiusEstimator::new(reference, ContactRadiusConfig::default()) {
         Ok(e) => e,
-        Err(e) => {
-            eprintln!("error: reference: {e}");
-            return ExitCode::from(2);
-        }
+        Err(e) => return fail("reference: ", &e),
     };
     let mut rows = Vec::new();
-    let mut total_s = 0.0;
+    let (mut measured, mut total_s) = (0usize, 0.0);
     if !args.json {
         println!(
             "{:<40} {:>7} {:>10} {:>19} {:>24} {:>7}",
             "frame", "contact", "radius_px", "center_px", "ellipse a/b/angle", "quality"
         );
     }
-    for (label, img) in &frames {
+    loop {
+        let frame = match first_file
+            .take()
+            .map(Ok)
+            .or_else(|| feed.next().transpose())
+        {
+            Some(Ok(f)) => f,
+            Some(Err(e)) => return fail("", &e),
+            None => break,
+        };
+        let label = &frame.label;
         let t0 = Instant::now();
-        let m = match estimator.measure(img) {
+        let m = match estimator.measure(&frame.image) {
             Ok(m) => m,
-            Err(e) => {
-                eprintln!("error: {label}: {e}");
-                return ExitCode::from(2);
-            }
+            Err(e) => return fail(&format!("{label}: "), &e),
         };
         total_s += t0.elapsed().as_secs_f64();
+        measured += 1;
         if args.json {
-            rows.push(json_row(label, &m));
+            rows.push(json_row(&frame, &m));
         } else {
             match &m.disc {
                 Some(d) => println!(
@@ -175,11 +364,10 @@ pub fn run(args: RadiusArgs) -> ExitCode {
     if args.json {
         println!("{}", serde_json::Value::Array(rows));
     }
-    if !frames.is_empty() {
+    if measured > 0 {
         eprintln!(
-            "{} frames, contact radius {:.3} ms per frame",
-            frames.len(),
-            total_s * 1e3 / frames.len() as f64
+            "{measured} frames, contact radius {:.3} ms per frame",
+            total_s * 1e3 / measured as f64
         );
     }
     ExitCode::SUCCESS
