@@ -16,6 +16,7 @@
 //!   the earlier ones included);
 //! - [`simulate`]: hidden-effect data from hil-sim for tests and the confusion matrix.
 
+pub mod applied;
 pub mod candidates;
 #[cfg(feature = "sim")]
 pub mod confusion;

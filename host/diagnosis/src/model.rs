@@ -126,7 +126,26 @@ pub struct AxisSurfaces<'a> {
     pub source: String,
 }
 
-impl AxisSurfaces<'_> {
+impl<'a> AxisSurfaces<'a> {
+    /// The slices of effect table `t` at each of its axis values.
+    pub fn new(t: &'a EffectTable) -> Result<Self, ModelError> {
+        let values = t.axis.values_in(&t.lut.grid).to_vec();
+        let surfaces = values
+            .iter()
+            .map(|&v| Surface::new(&t.lut, &t.axis.select(v)))
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(|source| ModelError::Effect {
+                table: t.path.clone(),
+                source,
+            })?;
+        Ok(Self {
+            axis: t.axis,
+            values,
+            surfaces,
+            source: t.path.clone(),
+        })
+    }
+
     /// `channel` at axis value `v` minus its value at the axis' base value (linear between
     /// axis nodes).
     pub fn delta(&self, channel: Channel, e: f64, p: f64, u: f64, v: f64) -> f64 {
@@ -181,24 +200,10 @@ impl<'a> Model<'a> {
         let base_lut = base;
         let base = Surface::new(base, &fem_core::lut::EffectSelection::default())
             .map_err(ModelError::Baseline)?;
-        let mut axes = Vec::new();
-        for t in effects {
-            let values = t.axis.values_in(&t.lut.grid).to_vec();
-            let surfaces = values
-                .iter()
-                .map(|&v| Surface::new(&t.lut, &t.axis.select(v)))
-                .collect::<Result<Vec<_>, _>>()
-                .map_err(|source| ModelError::Effect {
-                    table: t.path.clone(),
-                    source,
-                })?;
-            axes.push(AxisSurfaces {
-                axis: t.axis,
-                values,
-                surfaces,
-                source: t.path.clone(),
-            });
-        }
+        let axes = effects
+            .iter()
+            .map(AxisSurfaces::new)
+            .collect::<Result<Vec<_>, _>>()?;
         Ok(Self {
             base,
             base_lut,

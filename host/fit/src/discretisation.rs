@@ -91,7 +91,8 @@ pub fn shipped_finer_table(lut: &Lut) -> Option<Lut> {
 }
 
 /// [`fit_modulus`], then the interval widened by the model's discretisation term when the
-/// shipped finer table matches the model's table.
+/// shipped finer table matches the model's table. The term compares the two tables
+/// themselves (a model's augmentation is the same on both meshes, so it is left out).
 pub fn fit_modulus_with_model_error(
     model: &LutModel,
     points: &[FitPoint],
@@ -100,8 +101,9 @@ pub fn fit_modulus_with_model_error(
     let mut fit = fit_modulus(model, points, options)?;
     if let Some(fine) = shipped_finer_table(model.lut())
         && let Ok(fine_model) = LutModel::new(&fine)
+        && let Ok(table) = LutModel::new(model.lut())
     {
-        widen_for_discretisation(&mut fit, model, &fine_model, points);
+        widen_for_discretisation(&mut fit, &table, &fine_model, points);
     }
     Ok(fit)
 }

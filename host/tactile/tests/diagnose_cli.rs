@@ -316,3 +316,131 @@ fn record_folders_at_two_pressures_are_diagnosed_like_their_curves() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("record-6") && err.contains("running"), "{err}");
 }
+
+/// `tactile fit --json` of `curve` against `lut` (with `--model` if given): the modulus.
+fn fit_json(curve: &Path, lut: &Path, model: Option<&Path>) -> serde_json::Value {
+    let mut cmd = tactile();
+    cmd.args(["fit", "--json"]).arg(curve).arg("--lut").arg(lut);
+    if let Some(m) = model {
+        cmd.arg("--model").arg(m);
+    }
+    let out = cmd.output().expect("run tactile");
+    assert!(
+        out.status.success(),
+        "tactile fit failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).expect("one JSON object")
+}
+
+#[test]
+fn an_applied_diagnosis_corrects_the_next_samples_modulus() {
+    let dir = scratch("apply");
+    // The baseline the data and the diagnosis share (the effect tables' base slice), as a
+    // table file for `tactile fit --lut`.
+    let (base, _) = shipped_tables().expect("shipped tables");
+    let lut = dir.join("base.lut");
+    fem_core::lut::write_lut(&lut, &base).expect("write base table");
+    // This setup's sample is 3 mm thinner than the model assumes.
+    let diagnosed = dir.join("diagnosed.csv");
+    write_curves(
+        &diagnosed,
+        Some((EffectKind::FiniteThickness, 3.0)),
+        |_| 0.0,
+        5,
+        11,
+    );
+    let model = dir.join("setup-model.json");
+    let out = tactile()
+        .args(["diagnose", "--json", "--bootstrap", "100", "--reruns", "3"])
+        .arg(&diagnosed)
+        .arg("--apply")
+        .arg(&model)
+        .output()
+        .expect("run tactile");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let d: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+    assert_eq!(d["effect"], "finite_thickness", "{d:#}");
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&model).expect("model file")).expect("json");
+    assert_eq!(m["format"], "tactile-model");
+    assert_eq!(m["effects"][0]["effect"], "finite_thickness");
+    assert_eq!(m["effect_tables"].as_array().map(Vec::len), Some(1));
+    // The next sample of the same setup (another seed, same thinner sample): the plain
+    // table reads it too stiff, the model recovers it. The data are the same table's values
+    // plus noise, so the corrected fit is limited by the diagnosed thickness's error (its
+    // standard error in the model) and the fit's own scatter: within 1.5 %, against the
+    // plain fit's bias of several percent.
+    let next = dir.join("next.csv");
+    write_curves(
+        &next,
+        Some((EffectKind::FiniteThickness, 3.0)),
+        |_| 0.0,
+        5,
+        12,
+    );
+    let plain = fit_json(&next, &lut, None);
+    let corrected = fit_json(&next, &lut, Some(&model));
+    let e_plain = plain["modulus_kpa"].as_f64().expect("modulus");
+    let e_model = corrected["modulus_kpa"].as_f64().expect("modulus");
+    eprintln!("plain fit {e_plain:.1} kPa, with the model {e_model:.1} kPa (true 170)");
+    assert!((e_plain / 170.0 - 1.0).abs() > 0.04, "plain fit {e_plain}");
+    assert!(
+        (e_model / 170.0 - 1.0).abs() < 0.015,
+        "with the model {e_model}"
+    );
+    assert_eq!(
+        corrected["model"]["effects"][0]["effect"],
+        "finite_thickness"
+    );
+    assert!(
+        corrected["model"]["sha256"]
+            .as_str()
+            .is_some_and(|s| s.len() == 64)
+    );
+
+    // A model file edited by hand is refused with the field named.
+    let bad = dir.join("bad-model.json");
+    std::fs::write(
+        &bad,
+        std::fs::read_to_string(&model)
+            .expect("model")
+            .replace("finite_thickness", "lens_distortion"),
+    )
+    .expect("write");
+    let out = tactile()
+        .args(["fit", "--model"])
+        .arg(&bad)
+        .arg(&next)
+        .arg("--lut")
+        .arg(&lut)
+        .output()
+        .expect("run");
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("bad-model.json")
+            && err.contains("effects[0]")
+            && err.contains("lens_distortion"),
+        "{err}"
+    );
+
+    // Clean data: nothing named, nothing written, and the run says so.
+    let clean = dir.join("clean.csv");
+    write_curves(&clean, None, |_| 0.0, 5, 13);
+    let none_model = dir.join("none-model.json");
+    let out = tactile()
+        .args(["diagnose", "--bootstrap", "100", "--reruns", "3"])
+        .arg(&clean)
+        .arg("--apply")
+        .arg(&none_model)
+        .output()
+        .expect("run");
+    assert_eq!(out.status.code(), Some(1));
+    assert!(!none_model.exists());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("no effect to add"));
+}

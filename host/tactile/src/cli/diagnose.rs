@@ -71,6 +71,11 @@ pub struct DiagnoseArgs {
     /// run).
     #[arg(long, value_delimiter = ',', value_name = "EFFECT")]
     pub confusion_effects: Vec<String>,
+    /// Write the final model (the effects named, at their fitted parameters) to this model
+    /// file, for `tactile fit --model`, `tactile measure --model` and the daemon's
+    /// `--model`: the later samples of the same setup are fitted with it.
+    #[arg(long, value_name = "FILE")]
+    pub apply: Option<PathBuf>,
     /// Seeds per cell of the confusion matrix.
     #[arg(long, default_value_t = 3)]
     pub seeds: u64,
@@ -128,6 +133,36 @@ pub fn run(args: DiagnoseArgs) -> ExitCode {
         }
     };
     d.notes.push(format!("baseline table: {base_source}"));
+    let applied = match &args.apply {
+        Some(file) => {
+            let inputs = args
+                .curves
+                .iter()
+                .map(|p| p.display().to_string())
+                .collect();
+            match diagnosis::applied::model_of_diagnosis(&d, &effects, inputs, base_source.clone())
+            {
+                Ok(m) => {
+                    if let Err(e) = m.write(file) {
+                        eprintln!("error: {e}");
+                        return ExitCode::from(1);
+                    }
+                    d.notes.push(format!(
+                        "model written to {} ({}): fit later samples of this setup with --model {}",
+                        file.display(),
+                        m.summary(),
+                        file.display()
+                    ));
+                    true
+                }
+                Err(e) => {
+                    eprintln!("error: --apply {}: {e}; nothing written", file.display());
+                    false
+                }
+            }
+        }
+        None => true,
+    };
     if let Some(dir) = &args.out
         && let Err(e) = report::write_outputs(&d, dir)
     {
@@ -145,7 +180,11 @@ pub fn run(args: DiagnoseArgs) -> ExitCode {
             );
         }
     }
-    ExitCode::SUCCESS
+    if applied {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(1)
+    }
 }
 
 type Tables = (fem_core::lut::Lut, String, Vec<EffectTable>);

@@ -1,8 +1,11 @@
-//! `tactile fit CURVE.csv [--lut FILE] [--json] [--load]`: the modulus of a measured curve,
-//! with its 95 % interval, residual RMS and the recommended pressure.
+//! `tactile fit CURVE.csv [--lut FILE] [--model FILE] [--json] [--load]`: the modulus of a
+//! measured curve, with its 95 % interval, residual RMS and the recommended pressure; with
+//! `--model`, against the table augmented with the effects a diagnosis found for this setup
+//! (`tactile diagnose --apply`).
 //! Exit codes: 0 success, 1 the fit failed, 2 bad input (file, CSV, table).
 
 use clap::Args;
+use diagnosis::applied::LoadedModel;
 use fit::{FitOptions, LutModel, points_from_curve_csv, recommend_pressure};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -21,6 +24,9 @@ pub struct FitArgs {
     /// Add the load channel (P–u_s) to the fit when the curve has loads.
     #[arg(long)]
     pub load: bool,
+    /// Model file of this setup (`tactile diagnose --apply`): fit with its effects.
+    #[arg(long, value_name = "FILE")]
+    pub model: Option<PathBuf>,
 }
 
 /// The table path used when none is given.
@@ -54,7 +60,21 @@ pub fn run(args: FitArgs) -> ExitCode {
             return ExitCode::from(2);
         }
     };
-    let model = match LutModel::new(&lut_file.lut) {
+    let setup = match args.model.as_deref().map(LoadedModel::load).transpose() {
+        Ok(m) => m,
+        Err(e) => {
+            eprintln!("error: --model: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    let augmentation = match setup.as_ref().map(LoadedModel::augmentation).transpose() {
+        Ok(a) => a.unwrap_or_default(),
+        Err(e) => {
+            eprintln!("error: --model: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    let model = match LutModel::with_augmentation(&lut_file.lut, augmentation) {
         Ok(m) => m,
         Err(e) => {
             eprintln!("error: lookup table {}: {e}", lut_path.display());
@@ -99,6 +119,7 @@ pub fn run(args: FitArgs) -> ExitCode {
             "recommended_pressure_kpa": recommended,
             "pressure_sensitivity": sens,
             "lut": { "path": lut_path.display().to_string(), "sha256": lut_file.sha256 },
+            "model": setup.as_ref().map(model_info),
             "fit_seconds": fit_seconds,
         });
         println!("{value}");
@@ -122,10 +143,26 @@ pub fn run(args: FitArgs) -> ExitCode {
                 p.p_air_kpa, p.modulus_kpa, p.ci95_kpa[0], p.ci95_kpa[1]
             );
         }
+        if let Some(m) = &setup {
+            println!(
+                "model {}: the table with {}",
+                m.path.display(),
+                m.file.summary()
+            );
+        }
         if let Some(p) = recommended {
             println!("recommended internal pressure for this modulus: {p} kPa");
         }
         println!("fit time {:.3} ms", fit_seconds * 1e3);
     }
     ExitCode::SUCCESS
+}
+
+/// What a result records of the model it was fitted with.
+pub fn model_info(m: &LoadedModel) -> serde_json::Value {
+    serde_json::json!({
+        "path": m.path.display().to_string(),
+        "sha256": m.sha256,
+        "effects": m.file.effects,
+    })
 }
