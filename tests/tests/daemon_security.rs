@@ -203,6 +203,7 @@ fn non_loopback_needs_an_explicit_flag() {
             idle_stream_hz: 100,
             link: link::LinkConfig::default(),
             camera: None,
+            model: None,
         },
     };
     let e = daemon::start(options).unwrap_err();

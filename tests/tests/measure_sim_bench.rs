@@ -258,5 +258,6 @@ fn fit_table_info(file: &fem_core::lut::LutFile) -> LutInfo {
     LutInfo {
         path: demo_fit_lut_path().display().to_string(),
         sha256: file.sha256.clone(),
+        model: None,
     }
 }

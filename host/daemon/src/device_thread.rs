@@ -16,6 +16,7 @@ use super::fit_worker::FitWorker;
 use super::guarded_transport::{GuardedTransport, StopKind};
 use super::jobs;
 use super::shared::{Command, CommandError, Shared};
+use diagnosis::applied::LoadedModel;
 use link::{Link, LinkConfig, LinkError, SerialTransport};
 
 /// Where the device is.
@@ -39,6 +40,9 @@ pub struct DeviceConfig {
     pub link: LinkConfig,
     /// Camera device (real hardware); see the status's `camera` field.
     pub camera: Option<String>,
+    /// The setup's model file (`tactile diagnose --apply`): every fit (the running one and
+    /// the final one) uses the table with its effects, and every record keeps it.
+    pub model: Option<std::path::PathBuf>,
 }
 
 /// How serving one connection ended.
@@ -59,6 +63,8 @@ pub struct DeviceThread {
     pub(super) fit: FitWorker,
     pub(super) lut: Arc<Lut>,
     pub(super) lut_info: experiment::pipeline::LutInfo,
+    /// The setup's model (see [`DeviceConfig::model`]).
+    pub(super) setup_model: Option<Arc<LoadedModel>>,
     /// USB serial number of the controller (real hardware), learnt at the first connect.
     usb_serial: Option<String>,
     /// Serial number from the device's Hello, learnt at the first connect.
@@ -115,10 +121,23 @@ impl DeviceThread {
         source: DeviceSource,
         config: DeviceConfig,
         lut: Arc<Lut>,
-        lut_info: experiment::pipeline::LutInfo,
+        mut lut_info: experiment::pipeline::LutInfo,
     ) -> Result<Self, String> {
-        let fit = FitWorker::start(Arc::clone(&lut), Arc::clone(&shared.switch))
-            .map_err(|e| format!("the fit worker thread: {e}"))?;
+        let setup_model = match &config.model {
+            Some(path) => {
+                let m = LoadedModel::load(path).map_err(|e| format!("--model: {e}"))?;
+                m.augmentation().map_err(|e| format!("--model: {e}"))?;
+                lut_info.model = Some(m.record());
+                Some(Arc::new(m))
+            }
+            None => None,
+        };
+        let fit = FitWorker::start(
+            Arc::clone(&lut),
+            setup_model.clone(),
+            Arc::clone(&shared.switch),
+        )
+        .map_err(|e| format!("the fit worker thread: {e}"))?;
         let camera = match (&source, &config.camera) {
             #[cfg(feature = "sim")]
             (DeviceSource::Sim { .. }, _) => "simulated (hil-sim frame channel)".to_string(),
@@ -134,6 +153,7 @@ impl DeviceThread {
             fit,
             lut,
             lut_info,
+            setup_model,
             usb_serial: None,
             device_serial: None,
             open_gap: None,

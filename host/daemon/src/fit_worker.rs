@@ -10,6 +10,7 @@ use std::sync::mpsc::{Receiver, Sender, channel};
 
 use super::api::{Event, FitSummary};
 use super::guarded_transport::StopSwitch;
+use diagnosis::applied::LoadedModel;
 use fit::{FitOptions, FitPoint, LutModel, ModulusFit, fit_modulus};
 
 /// One request: fit `points` and publish the result on the live feed.
@@ -26,12 +27,16 @@ pub struct FitWorker {
 }
 
 impl FitWorker {
-    /// Starts the worker on `lut`.
-    pub fn start(lut: Arc<Lut>, switch: Arc<StopSwitch>) -> std::io::Result<Self> {
+    /// Starts the worker on `lut` (augmented with the setup's `model`, if any).
+    pub fn start(
+        lut: Arc<Lut>,
+        model: Option<Arc<LoadedModel>>,
+        switch: Arc<StopSwitch>,
+    ) -> std::io::Result<Self> {
         let (tx, rx) = channel::<FitRequest>();
         std::thread::Builder::new()
             .name("daemon-fit".into())
-            .spawn(move || run(&lut, rx, &switch))?;
+            .spawn(move || run(&lut, model.as_deref(), rx, &switch))?;
         Ok(Self { tx })
     }
 
@@ -86,8 +91,18 @@ pub fn load_lut(path: &Path) -> Result<(Arc<Lut>, String), LoadLutError> {
     Ok((Arc::new(file.lut), file.sha256))
 }
 
-fn run(lut: &Lut, rx: Receiver<FitRequest>, switch: &StopSwitch) {
-    let Ok(model) = LutModel::new(lut) else {
+/// The fit's model: `lut`, with the setup's effects if there is a model file.
+pub fn fit_model<'a>(lut: &'a Lut, setup: Option<&'a LoadedModel>) -> Result<LutModel<'a>, String> {
+    let augmentation = setup
+        .map(LoadedModel::augmentation)
+        .transpose()
+        .map_err(|e| e.to_string())?
+        .unwrap_or_default();
+    LutModel::with_augmentation(lut, augmentation).map_err(|e| format!("lookup table: {e}"))
+}
+
+fn run(lut: &Lut, setup: Option<&LoadedModel>, rx: Receiver<FitRequest>, switch: &StopSwitch) {
+    let Ok(model) = fit_model(lut, setup) else {
         return;
     };
     while let Ok(mut request) = rx.recv() {

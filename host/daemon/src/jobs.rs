@@ -448,10 +448,10 @@ pub fn run_experiment(dt: &mut DeviceThread, link: &mut Link, job: Job) -> Optio
         );
         return None;
     };
-    let model = match LutModel::new(&dt.lut) {
+    let model = match super::fit_worker::fit_model(&dt.lut, dt.setup_model.as_deref()) {
         Ok(m) => m,
         Err(e) => {
-            dt.finish_job(job.id, JobState::Failed, format!("lookup table: {e}"), None);
+            dt.finish_job(job.id, JobState::Failed, e, None);
             return None;
         }
     };

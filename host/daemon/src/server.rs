@@ -143,6 +143,7 @@ pub fn start(options: DaemonOptions) -> Result<DaemonHandle, DaemonError> {
         experiment::pipeline::LutInfo {
             path: options.lut_path.display().to_string(),
             sha256: lut_sha256,
+            model: None,
         },
     )
     .map_err(DaemonError::Start)?;

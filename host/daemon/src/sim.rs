@@ -53,6 +53,46 @@ pub fn start_sim_daemon_capped(
     idle_stream_hz: u16,
     max_connections: usize,
 ) -> Result<DaemonHandle, DaemonError> {
+    start_sim_daemon_full(
+        scenario,
+        listen,
+        records_dir,
+        token_file,
+        idle_stream_hz,
+        max_connections,
+        None,
+    )
+}
+
+/// [`start_sim_daemon`] whose fits use the setup's model file (`tactile diagnose --apply`).
+pub fn start_sim_daemon_with_model(
+    scenario: Option<Scenario>,
+    listen: SocketAddr,
+    records_dir: &Path,
+    token_file: &Path,
+    idle_stream_hz: u16,
+    model: &Path,
+) -> Result<DaemonHandle, DaemonError> {
+    start_sim_daemon_full(
+        scenario,
+        listen,
+        records_dir,
+        token_file,
+        idle_stream_hz,
+        super::listener::MAX_CONNECTIONS,
+        Some(model.to_path_buf()),
+    )
+}
+
+fn start_sim_daemon_full(
+    scenario: Option<Scenario>,
+    listen: SocketAddr,
+    records_dir: &Path,
+    token_file: &Path,
+    idle_stream_hz: u16,
+    max_connections: usize,
+    model: Option<PathBuf>,
+) -> Result<DaemonHandle, DaemonError> {
     let lut = sim_lut();
     let scenario = scenario.unwrap_or_else(|| super::jobs::default_sim_scenario(&lut));
     let bench = start_bench(scenario.clone(), BenchOptions::default())
@@ -76,6 +116,7 @@ pub fn start_sim_daemon_capped(
                 ..LinkConfig::default()
             },
             camera: None,
+            model,
         },
     })
 }

@@ -50,10 +50,12 @@ pub struct ModelFile {
 pub struct AppliedEffect {
     /// The effect's name in the diagnosis (`finite_thickness`, `radius_scale`, ...).
     pub effect: String,
-    /// Its parameter's name and value (units in the name), and the value's standard error.
+    /// Its parameter's name and value (units in the name), and the value's standard error
+    /// (absent where the diagnosis could not estimate it).
     pub parameter: String,
     pub value: f64,
-    pub se: f64,
+    #[serde(default)]
+    pub se: Option<f64>,
 }
 
 /// An effect table a model needs, as it was when the model was written.
@@ -73,7 +75,9 @@ pub struct DiagnosisSource {
     /// The baseline table of the diagnosis.
     pub baseline: String,
     /// The host's fit of the data without the effects, and the diagnosis's with them.
-    pub modulus_before_kpa: f64,
+    #[serde(default)]
+    pub modulus_before_kpa: Option<f64>,
+    #[serde(default)]
     pub modulus_after_kpa: Option<f64>,
 }
 
@@ -287,7 +291,7 @@ pub fn model_of_diagnosis(
             effect: named.effect.clone(),
             parameter: pname.to_string(),
             value,
-            se: param["se"].as_f64().unwrap_or(f64::NAN),
+            se: param["se"].as_f64().filter(|s| s.is_finite()),
         });
     }
     if effects.is_empty() {
@@ -302,8 +306,8 @@ pub fn model_of_diagnosis(
         DiagnosisSource {
             inputs,
             baseline,
-            modulus_before_kpa: d.forward.modulus_before_kpa,
-            modulus_after_kpa: Some(d.forward.modulus_after_kpa),
+            modulus_before_kpa: Some(d.forward.modulus_before_kpa).filter(|e| e.is_finite()),
+            modulus_after_kpa: Some(d.forward.modulus_after_kpa).filter(|e| e.is_finite()),
         },
     )
 }
@@ -380,6 +384,16 @@ impl LoadedModel {
             sha256: fem_core::lut::format::sha256_hex(&bytes),
             file,
             tables,
+        })
+    }
+
+    /// What a record keeps of the model: its path, SHA-256 and whole contents.
+    pub fn record(&self) -> serde_json::Value {
+        serde_json::json!({
+            "path": self.path.display().to_string(),
+            "sha256": self.sha256,
+            "effects": self.file.effects,
+            "file": self.file,
         })
     }
 

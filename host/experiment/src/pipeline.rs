@@ -48,6 +48,10 @@ pub enum RunError {
 pub struct LutInfo {
     pub path: String,
     pub sha256: String,
+    /// The setup's model file the table was augmented with (`tactile diagnose --apply`):
+    /// its path, SHA-256 and contents.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model: Option<serde_json::Value>,
 }
 
 /// What an experiment produced.

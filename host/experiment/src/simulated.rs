@@ -615,6 +615,7 @@ pub fn run_demo_with(scenario: Scenario, options: &DemoOptions) -> Result<DemoRe
         &super::pipeline::LutInfo {
             path: lut_path.display().to_string(),
             sha256: lut_file.sha256.clone(),
+            model: None,
         },
         &context,
         &progress,

@@ -650,7 +650,11 @@ pub fn fit_modulus(
         }
     }
     pressures.sort_by(f64::total_cmp);
-    let all: Vec<usize> = (0..points.len()).collect();
+    // Points without a contact seen (a = 0: before contact, or a frame the vision declined)
+    // are not measurements of a(u_s): the table has a > 0 wherever it is read.
+    let all: Vec<usize> = (0..points.len())
+        .filter(|&i| points[i].a_mm > 0.0)
+        .collect();
     let a_only = Problem::new(model, points, 0.0);
     let mut core = a_only.solve(&all, options.max_iterations, None)?;
     let n = core.used.len();

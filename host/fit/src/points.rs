@@ -25,8 +25,9 @@ pub enum PointsError {
 }
 
 /// The loading points of a curve file (unloading rows are left out: the model is the
-/// loading curve). The pressure comes from the row's `p_air_kpa` or the file's
-/// `# p_air_kpa:` line.
+/// loading curve). The pressure is the file's `# p_air_kpa:` line (the set point, as a
+/// record's curve.csv states it; its rows carry the manometer's noisy readings), else the
+/// row's `p_air_kpa`.
 pub fn points_from_curve_csv(curve: &CurveCsv, file: &str) -> Result<Vec<FitPoint>, PointsError> {
     let default_p = match curve.meta("p_air_kpa") {
         Some(v) => Some(
@@ -44,9 +45,8 @@ pub fn points_from_curve_csv(curve: &CurveCsv, file: &str) -> Result<Vec<FitPoin
         if row.phase == Some(Phase::Unload) {
             continue;
         }
-        let p = row
-            .p_air_kpa
-            .or(default_p)
+        let p = default_p
+            .or(row.p_air_kpa)
             .ok_or_else(|| PointsError::NoPressure {
                 file: file.to_string(),
             })?;

@@ -240,6 +240,7 @@ fn write_record(dir: &Path, curve: &fit::curve_csv::CurveCsv, pressure_kpa: f64,
         lut: LutInfo {
             path: "default.lut".into(),
             sha256: String::new(),
+            model: None,
         },
         calibration: CalibrationRecord::new("E6614C311B4A2C2D", "0.1.0"),
         calibration_path: None,

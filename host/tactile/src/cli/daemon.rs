@@ -43,6 +43,10 @@ pub struct DaemonArgs {
     /// fem-core/data/default-fine.lut).
     #[arg(long)]
     lut: Option<PathBuf>,
+    /// The setup's model file (`tactile diagnose --apply`): every experiment's fit uses the
+    /// table with its effects, and every record keeps it.
+    #[arg(long, value_name = "FILE")]
+    model: Option<PathBuf>,
     /// Stream rate while idle (Hz); experiments use their own.
     #[arg(long, default_value_t = 2000)]
     stream_hz: u16,
@@ -123,6 +127,7 @@ pub fn run(args: DaemonArgs) -> ExitCode {
             idle_stream_hz: args.stream_hz,
             link,
             camera: args.camera.clone(),
+            model: args.model.clone(),
         },
     };
     match daemon::start(options) {
@@ -138,6 +143,9 @@ pub fn run(args: DaemonArgs) -> ExitCode {
                 },
                 args.records.display()
             );
+            if let Some(m) = &args.model {
+                eprintln!("fits use the setup's model {}", m.display());
+            }
             eprintln!(
                 "dashboard: {} (the address works once; `tactile dashboard` prints a new one)",
                 handle.login_url

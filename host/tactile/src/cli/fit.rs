@@ -160,9 +160,5 @@ pub fn run(args: FitArgs) -> ExitCode {
 
 /// What a result records of the model it was fitted with.
 pub fn model_info(m: &LoadedModel) -> serde_json::Value {
-    serde_json::json!({
-        "path": m.path.display().to_string(),
-        "sha256": m.sha256,
-        "effects": m.file.effects,
-    })
+    m.record()
 }

@@ -8,6 +8,7 @@ use std::process::ExitCode;
 use std::time::Duration;
 
 use camera::{V4l2Config, V4l2Source};
+use diagnosis::applied::LoadedModel;
 use experiment::IndentationPlan;
 use experiment::calibration::{CalibrationRecord, load_latest, load_record};
 use experiment::camera_radius::{CameraRadiusSource, capture_reference};
@@ -56,6 +57,10 @@ pub struct MeasureArgs {
     /// Lookup table for the fit (default: fem-core/data/default.lut of this source tree).
     #[arg(long)]
     pub lut: Option<PathBuf>,
+    /// Model file of this setup (`tactile diagnose --apply`): the fit uses the table with
+    /// its effects, and the record keeps the model.
+    #[arg(long, value_name = "FILE")]
+    pub model: Option<PathBuf>,
     /// Print one JSON object.
     #[arg(long)]
     pub json: bool,
@@ -109,7 +114,15 @@ pub fn run(args: MeasureArgs) -> ExitCode {
         Ok(f) => f,
         Err(e) => return input(format!("lookup table {}: {e}", lut_path.display())),
     };
-    let model = match LutModel::new(&lut_file.lut) {
+    let setup = match args.model.as_deref().map(LoadedModel::load).transpose() {
+        Ok(m) => m,
+        Err(e) => return input(format!("--model: {e}")),
+    };
+    let augmentation = match setup.as_ref().map(LoadedModel::augmentation).transpose() {
+        Ok(a) => a.unwrap_or_default(),
+        Err(e) => return input(format!("--model: {e}")),
+    };
+    let model = match LutModel::with_augmentation(&lut_file.lut, augmentation) {
         Ok(m) => m,
         Err(e) => return input(format!("lookup table {}: {e}", lut_path.display())),
     };
@@ -162,6 +175,7 @@ pub fn run(args: MeasureArgs) -> ExitCode {
     let lut = LutInfo {
         path: lut_path.display().to_string(),
         sha256: lut_file.sha256.clone(),
+        model: setup.as_ref().map(super::fit::model_info),
     };
     let context = RunContext {
         software: "tactile measure".into(),
@@ -225,6 +239,13 @@ pub fn run(args: MeasureArgs) -> ExitCode {
                     &report.record_dir,
                     &report.notes,
                 );
+                if let Some(m) = &setup {
+                    println!(
+                        "fitted with the setup's model {}: {}",
+                        m.path.display(),
+                        m.file.summary()
+                    );
+                }
             }
             ExitCode::SUCCESS
         }
