@@ -5,12 +5,14 @@
 # /dev/ttyACM0, VID:PID 1209:7AC7) served by hil-sim on /dev/ttyGS0, an RP2040 boot ROM
 # (2E8A:0003, PICOBOOT through FunctionFS, served by hil-sim's picoboot-gadget) that
 # `tactile flash` writes through libusb, and vivid's video output -> capture loop carrying
-# hil-sim's rendered frames to `tactile`'s V4L2 capture.
+# hil-sim's rendered frames to `tactile`'s V4L2 capture (and v4l2loopback, the loopback a
+# workstation uses, built from Debian's source against that kernel).
 # The cases themselves are scripts/vm/cases.sh (run by scripts/vm/init.sh as PID 1).
 #
 # Installs what it needs (idempotent): qemu-system-x86, busybox-static and v4l-utils (its
 # v4l2-ctl sets vivid up inside the machine) from Debian, and Debian's kernel package,
-# downloaded once into target/vm-cache (never into git). Prints one line per case and
+# downloaded once into target/vm-cache (never into git), with its linux-headers package,
+# make and gcc to build v4l2loopback's module into the same cache. Prints one line per case and
 # `N passed, M failed` last; exits non-zero on any failure or if the VM does not finish
 # within VM_TIMEOUT_S.
 #
@@ -69,6 +71,34 @@ fi
 vmlinuz=$(ls "$cache"/kernel/boot/vmlinuz-* | head -n 1)
 kver=${vmlinuz##*/vmlinuz-}
 moddir="$cache/kernel/lib/modules/$kver"
+
+# --- 2b. v4l2loopback, the out-of-tree video loopback a workstation uses (built once) --
+# from Debian's v4l2loopback-dkms source against that kernel's headers (linux-headers-*,
+# installed like the packages above; the module builds in seconds)
+loopback_ko="$cache/v4l2loopback-$kver/v4l2loopback.ko"
+if [ ! -f "$loopback_ko" ]; then
+    need_pkgs=()
+    [ -d "/usr/src/linux-headers-$kver" ] || need_pkgs+=("linux-headers-$kver")
+    command -v make >/dev/null || need_pkgs+=(make)
+    command -v gcc >/dev/null || need_pkgs+=(gcc)
+    if [ "${#need_pkgs[@]}" -gt 0 ]; then
+        if command -v sudo >/dev/null && [ "$(id -u)" -ne 0 ]; then SUDO=sudo; else SUDO=; fi
+        say "installing ${need_pkgs[*]}"
+        $SUDO apt-get update -qq
+        DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends \
+            "${need_pkgs[@]}" >/dev/null
+    fi
+    rm -rf "$cache/v4l2loopback.tmp"
+    mkdir -p "$cache/v4l2loopback.tmp"
+    (cd "$cache/v4l2loopback.tmp" && apt-get download v4l2loopback-dkms 2>/dev/null)
+    dpkg-deb -x "$cache"/v4l2loopback.tmp/v4l2loopback-dkms_*.deb "$cache/v4l2loopback.tmp/x"
+    src=$(ls -d "$cache"/v4l2loopback.tmp/x/usr/src/v4l2loopback-* | head -n 1)
+    make -s -C "/usr/src/linux-headers-$kver" M="$root/$src" modules >/dev/null
+    mkdir -p "$(dirname "$loopback_ko")"
+    cp "$src/v4l2loopback.ko" "$loopback_ko"
+    rm -rf "$cache/v4l2loopback.tmp"
+    say "built v4l2loopback ($(basename "$src")) for $kver"
+fi
 
 # --- 3. the release binaries -----------------------------------------------------------
 if [ "${VM_SKIP_BUILD:-0}" != 1 ]; then
@@ -129,6 +159,7 @@ while IFS= read -r f; do
     n=${n%.ko}
     modpath[${n//-/_}]=$f
 done < <(find "$moddir/kernel" -name '*.ko')
+modpath[v4l2loopback]=$loopback_ko
 declare -A loaded=()
 order=()
 add_module() {
@@ -146,7 +177,7 @@ add_module() {
     loaded[$name]=1
     order+=("$name")
 }
-for m in configfs dummy_hcd libcomposite usb_f_acm usb_f_fs cdc_acm vivid; do add_module "$m"; done
+for m in configfs dummy_hcd libcomposite usb_f_acm usb_f_fs cdc_acm vivid v4l2loopback; do add_module "$m"; done
 for m in "${order[@]}"; do
     cp "${modpath[$m]}" "$tree/lib/modules/$m.ko"
 done

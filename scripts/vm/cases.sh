@@ -529,6 +529,53 @@ TOML
     awk "BEGIN { exit !(\"$r\" != \"null\" && $r > $truth - 1 && $r < $truth + 1) }"
 }
 
+# v4l2loopback, the video loopback a workstation without a camera uses (docs/testing.md):
+# hil-sim writes its frames to /dev/video10 and `tactile radius --camera /dev/video10` reads
+# them from the same node (with exclusive_caps the node turns into a capture device once
+# hil-sim writes). Checked as through vivid: the format, increasing sequence numbers and
+# timestamps, no contact before the indentation, the last radius within 1 px of the truth.
+case_loopback_camera() {
+    cat >/tmp/frames-loopback.toml <<'TOML'
+name = "vm-frames-loopback"
+duration_s = 60.0
+[camera]
+fps = 30.0
+[[programme]]
+at_s = 0.0
+request = { SetLed = { duty_per_10k = 10000 } }
+[[programme]]
+at_s = 0.0
+request = { SetPressure = { setpoint_kpa = 6.0 } }
+[[programme]]
+at_s = 6.0
+indent_to_mm = 1.5
+speed_mm_per_s = 1.0
+TOML
+    [ -e /dev/video10 ] || { ls /dev/video*; return 1; }
+    cat /sys/class/video4linux/video10/name
+    hilsim_start --scenario /tmp/frames-loopback.toml --camera-out /dev/video10 \
+        --pacing realtime --camera-truth /tmp/truth-loopback.csv || return 1
+    timeout 300 tactile radius --camera /dev/video10 --seconds 12 --json \
+        >/tmp/loop.json 2>/tmp/loop.err || { cat /tmp/loop.err "$HILSIM_LOG"; return 1; }
+    truth=$(tail -n 1 /tmp/truth-loopback.csv | cut -d, -f3)
+    hilsim_stop
+    cat /tmp/loop.err
+    grep -q 'Gray8 640x480$' /tmp/loop.err || return 1
+    tr ',' '\n' </tmp/loop.json | awk -F: '/"contact":/ { c = $2 } /"radius_px":/ { r = $2 }
+        /"host_time_us":/ { t = $2 } /"pixel_format":/ { f = $2; gsub(/"/, "", f) }
+        /"sequence":/ { s = $2; gsub(/[^0-9]/, "", s); print c, r, t, f, s }' >/tmp/loop.rows
+    awk 'NR % 20 == 1' /tmp/loop.rows
+    rows=$(wc -l </tmp/loop.rows)
+    [ "$rows" -ge 30 ] || { echo "only $rows frames in 12 s"; return 1; }
+    r=$(tail -n 1 /tmp/loop.rows | cut -d' ' -f2)
+    detail "$(cat /sys/class/video4linux/video10/name): $rows frames, $(grep -c '^false' /tmp/loop.rows) without contact, the last $r px (rendered $truth px)"
+    awk '$4 != "Gray8" { print "format", $4, "at row", NR; exit 1 }
+        NR > 1 && ($5 <= seq || $3 <= t) { print "sequence or time not increasing at row", NR; exit 1 }
+        { seq = $5; t = $3 }' /tmp/loop.rows || return 1
+    head -n 1 /tmp/loop.rows | grep -q '^false' || return 1
+    awk "BEGIN { exit !(\"$r\" != \"null\" && $r > $truth - 1 && $r < $truth + 1) }"
+}
+
 # One frame from vivid's capture node as a PGM file.
 grab() {
     v4l2-ctl -d /dev/video0 --stream-mmap --stream-count=1 --stream-to=/tmp/grab.raw || return 1
@@ -778,6 +825,7 @@ run daemon_reconnects
 run vivid_loop
 run camera_frames
 run camera_formats
+run loopback_camera
 run calibrate_rigid
 run calibrate_camera
 run camera_latency

@@ -33,6 +33,8 @@ for m in $(cat /lib/modules/order); do
     # output node (/dev/video1, one HDMI output), no cropping, composing or scaling: the
     # output -> capture loop then passes frames through pixel for pixel.
     vivid) args="n_devs=1 node_types=0x101 num_inputs=1 input_types=0x3 num_outputs=1 output_types=0x1 ccs_cap_mode=0 ccs_out_mode=0" ;;
+    # one loopback device, /dev/video10, as the workstation setup in docs/testing.md
+    v4l2loopback) args="devices=1 video_nr=10 card_label=hil-sim exclusive_caps=1" ;;
     esac
     # shellcheck disable=SC2086 # the arguments are separate words
     if ! insmod "/lib/modules/$m.ko" $args 2>/tmp/insmod.log; then

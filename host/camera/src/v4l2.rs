@@ -125,6 +125,42 @@ pub fn unwrap_sequence(previous: Option<u64>, driver: u32) -> u64 {
     n
 }
 
+/// Frame numbers from the driver's sequence counter. Most drivers count every frame they
+/// capture, so the numbers show dropped frames as gaps; a driver that does not (the same
+/// number twice, as v4l2loopback 0.12 gives 0 to every frame) is counted here from then
+/// on, one per frame dequeued (its drops cannot be seen).
+#[derive(Debug, Clone, Default)]
+pub struct SequenceCounter {
+    last: Option<(u64, u32)>,
+    driver_stuck: bool,
+}
+
+impl SequenceCounter {
+    /// The number of the frame the driver numbered `driver`.
+    pub fn next(&mut self, driver: u32) -> u64 {
+        let n = match self.last {
+            None => u64::from(driver),
+            Some((prev, prev_driver)) => {
+                if driver == prev_driver {
+                    self.driver_stuck = true;
+                }
+                if self.driver_stuck {
+                    prev + 1
+                } else {
+                    unwrap_sequence(Some(prev), driver)
+                }
+            }
+        };
+        self.last = Some((n, driver));
+        n
+    }
+
+    /// Whether the driver's own numbers are used (false once it repeated one).
+    pub fn driver_counts(&self) -> bool {
+        !self.driver_stuck
+    }
+}
+
 /// The host time of a frame: the driver's monotonic timestamp mapped to the host clock
 /// (given both clocks' readings now), or `host_now_us` if the driver gave none or one that
 /// cannot be right (later than now, or older than [`PLAUSIBLE_AGE_US`]).
@@ -149,8 +185,8 @@ pub struct V4l2Source {
     width: u32,
     height: u32,
     stride: u32,
-    /// The driver's 32-bit sequence counter, unwrapped.
-    sequence: Option<u64>,
+    /// The driver's 32-bit sequence counter, unwrapped (or frames counted here).
+    sequence: SequenceCounter,
     /// Controls that were switched to manual.
     pub locked_controls: Vec<String>,
 }
@@ -254,7 +290,7 @@ impl V4l2Source {
                 width,
                 height,
                 stride,
-                sequence: None,
+                sequence: SequenceCounter::default(),
                 locked_controls: locked,
             });
         }
@@ -321,8 +357,7 @@ impl FrameSource for V4l2Source {
                 device,
                 message: format!("dequeue: {e}"),
             })?;
-        let sequence = unwrap_sequence(self.sequence, info.sequence);
-        self.sequence = Some(sequence);
+        let sequence = self.sequence.next(info.sequence);
         let frame = Frame {
             format,
             width: w,

@@ -321,6 +321,16 @@ fn driver_sequence_unwraps_across_32_bits() {
     assert_eq!(unwrap_sequence(Some(7), 9), 9);
     assert_eq!(unwrap_sequence(Some(0xffff_fffe), 1), 0x1_0000_0001);
     assert_eq!(unwrap_sequence(Some(0x1_0000_0001), 3), 0x1_0000_0003);
+    // a counting driver's numbers are kept, gaps and the 32-bit wrap included
+    let mut c = camera::v4l2::SequenceCounter::default();
+    let got: Vec<u64> = [5, 6, 8, 0xffff_ffff, 0].map(|d| c.next(d)).to_vec();
+    assert_eq!(got, [5, 6, 8, 0xffff_ffff, 0x1_0000_0000]);
+    assert!(c.driver_counts());
+    // a driver that numbers every frame 0 (v4l2loopback 0.12): counted here
+    let mut c = camera::v4l2::SequenceCounter::default();
+    let got: Vec<u64> = [0, 0, 0, 0].map(|d| c.next(d)).to_vec();
+    assert_eq!(got, [0, 1, 2, 3]);
+    assert!(!c.driver_counts());
 }
 
 /// A frame's host time is the driver's monotonic timestamp moved onto the host clock by
