@@ -40,13 +40,16 @@ need_pkgs=()
 command -v qemu-system-x86_64 >/dev/null || need_pkgs+=(qemu-system-x86)
 dpkg -s busybox-static >/dev/null 2>&1 || need_pkgs+=(busybox-static)
 command -v v4l2-ctl >/dev/null || need_pkgs+=(v4l-utils)
-if [ "${#need_pkgs[@]}" -gt 0 ]; then
-    if command -v sudo >/dev/null && [ "$(id -u)" -ne 0 ]; then SUDO=sudo; else SUDO=; fi
-    say "installing ${need_pkgs[*]}"
-    $SUDO apt-get update -qq
-    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends \
-        "${need_pkgs[@]}" >/dev/null
-fi
+# Installs the Debian packages named (with sudo where it is needed and present).
+install_pkgs() {
+    local sudo=
+    if command -v sudo >/dev/null && [ "$(id -u)" -ne 0 ]; then sudo=sudo; fi
+    say "installing $*"
+    $sudo apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "$@" \
+        >/dev/null
+}
+if [ "${#need_pkgs[@]}" -gt 0 ]; then install_pkgs "${need_pkgs[@]}"; fi
 busybox=/bin/busybox
 ldd_out=$(LC_ALL=C ldd "$busybox" 2>&1 || true)
 if ! grep -q 'not a dynamic' <<<"$ldd_out"; then
@@ -81,13 +84,7 @@ if [ ! -f "$loopback_ko" ]; then
     [ -d "/usr/src/linux-headers-$kver" ] || need_pkgs+=("linux-headers-$kver")
     command -v make >/dev/null || need_pkgs+=(make)
     command -v gcc >/dev/null || need_pkgs+=(gcc)
-    if [ "${#need_pkgs[@]}" -gt 0 ]; then
-        if command -v sudo >/dev/null && [ "$(id -u)" -ne 0 ]; then SUDO=sudo; else SUDO=; fi
-        say "installing ${need_pkgs[*]}"
-        $SUDO apt-get update -qq
-        DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends \
-            "${need_pkgs[@]}" >/dev/null
-    fi
+    if [ "${#need_pkgs[@]}" -gt 0 ]; then install_pkgs "${need_pkgs[@]}"; fi
     rm -rf "$cache/v4l2loopback.tmp"
     mkdir -p "$cache/v4l2loopback.tmp"
     (cd "$cache/v4l2loopback.tmp" && apt-get download v4l2loopback-dkms 2>/dev/null)

@@ -401,26 +401,52 @@ case_vivid_loop() {
     detail "$(cat /sys/class/video4linux/video0/name) -> video0 and video1 at 640x480, GREY offered, loop on"
 }
 
+# A scenario whose own programme switches the LED on, sets 6 kPa and indents the sample by
+# 1.5 mm at 1 mm/s from $3 s on, the camera at 30 fps in format $4 (default GREY): written
+# to $1, named $2.
+frames_scenario() {
+    {
+        printf 'name = "%s"\nduration_s = 60.0\n[camera]\nfps = 30.0\n' "$2"
+        [ -n "${4:-}" ] && printf 'format = "%s"\n' "$4"
+        printf '[[programme]]\nat_s = 0.0\nrequest = { SetLed = { duty_per_10k = 10000 } }\n'
+        printf '[[programme]]\nat_s = 0.0\nrequest = { SetPressure = { setpoint_kpa = 6.0 } }\n'
+        printf '[[programme]]\nat_s = %s\nindent_to_mm = 1.5\nspeed_mm_per_s = 1.0\n' "$3"
+    } >"$1"
+}
+
+# `tactile radius --camera $1 --seconds 12 --json` on hil-sim's frames (the scenario's
+# indentation starting at 6 s, so the first frame, the reference, is taken without contact),
+# then its rows checked: every frame decoded as $2 (Gray8 or Yuyv), the frame numbers and
+# timestamps increasing, no contact first, the last radius within 1 px of the radius
+# hil-sim rendered last (the last line of its --camera-truth file $3). Sets LIVE_DETAIL.
+live_radius_check() {
+    timeout 300 tactile radius --camera "$1" --seconds 12 --json \
+        >/tmp/live.json 2>/tmp/live.err || { cat /tmp/live.err "$HILSIM_LOG"; return 1; }
+    truth=$(tail -n 1 "$3" | cut -d, -f3)
+    cat /tmp/live.err
+    grep -q "$2 640x480" /tmp/live.err || return 1
+    # one row per frame: contact, radius, timestamp, format, frame number (the keys of a
+    # row are in alphabetical order, "sequence" last)
+    tr ',' '\n' </tmp/live.json | awk -F: '/"contact":/ { c = $2 } /"radius_px":/ { r = $2 }
+        /"host_time_us":/ { t = $2 } /"pixel_format":/ { f = $2; gsub(/"/, "", f) }
+        /"sequence":/ { s = $2; gsub(/[^0-9]/, "", s); print c, r, t, f, s }' >/tmp/live.rows
+    awk 'NR % 20 == 1' /tmp/live.rows
+    rows=$(wc -l </tmp/live.rows)
+    [ "$rows" -ge 30 ] || { echo "only $rows frames in 12 s"; return 1; }
+    r=$(tail -n 1 /tmp/live.rows | cut -d' ' -f2)
+    LIVE_DETAIL="$rows frames, $(grep -c '^false' /tmp/live.rows) without contact, the last $r px (rendered $truth px)"
+    awk -v want="$2" '$4 != want { print "format", $4, "at row", NR; exit 1 }
+        NR > 1 && ($5 <= seq || $3 <= t) { print "frame number or time not increasing at row", NR; exit 1 }
+        { seq = $5; t = $3 }' /tmp/live.rows || return 1
+    head -n 1 /tmp/live.rows | grep -q '^false' || return 1
+    awk "BEGIN { exit !(\"$r\" != \"null\" && $r > $truth - 1 && $r < $truth + 1) }"
+}
+
 # hil-sim's frames through vivid without a host on the serial port: a scenario whose own
 # programme switches the LED on and indents the sample; frames captured with v4l2-ctl
 # before and during contact, measured with `tactile radius`.
 case_camera_frames() {
-    cat >/tmp/frames.toml <<'TOML'
-name = "vm-frames"
-duration_s = 60.0
-[camera]
-fps = 30.0
-[[programme]]
-at_s = 0.0
-request = { SetLed = { duty_per_10k = 10000 } }
-[[programme]]
-at_s = 0.0
-request = { SetPressure = { setpoint_kpa = 6.0 } }
-[[programme]]
-at_s = 3.0
-indent_to_mm = 1.5
-speed_mm_per_s = 1.0
-TOML
+    frames_scenario /tmp/frames.toml vm-frames 3.0
     hilsim_start --scenario /tmp/frames.toml --camera-out /dev/video1 --pacing realtime \
         --camera-truth /tmp/truth.csv || return 1
     # frames are published from the start; the indentation starts 3 s into the simulation
@@ -474,59 +500,23 @@ TOML
 # The contact radius after the scenario's indentation against the radius hil-sim rendered,
 # the driver's sequence numbers and timestamps increasing.
 case_camera_formats() {
-    cat >/tmp/frames-yuyv.toml <<'TOML'
-name = "vm-frames-yuyv"
-duration_s = 60.0
-[camera]
-fps = 30.0
-format = "yuyv"
-[[programme]]
-at_s = 0.0
-request = { SetLed = { duty_per_10k = 10000 } }
-[[programme]]
-at_s = 0.0
-request = { SetPressure = { setpoint_kpa = 6.0 } }
-[[programme]]
-at_s = 6.0
-indent_to_mm = 1.5
-speed_mm_per_s = 1.0
-TOML
+    frames_scenario /tmp/frames-yuyv.toml vm-frames-yuyv 6.0 yuyv
     v4l2-ctl -d /dev/video0 --set-fmt-video=width=640,height=480,pixelformat=YUYV || return 1
     v4l2-ctl -d /dev/video0 --get-fmt-video | grep -q YUYV || return 1
     hilsim_start --scenario /tmp/frames-yuyv.toml --camera-out /dev/video1 --pacing realtime \
         --camera-truth /tmp/truth-yuyv.csv || return 1
-    # The first frame (the reference) a few seconds before the indentation starts at 6 s;
-    # 12 s of frames from there reach past the indentation's end at 7.5 s and its settling
-    # (measuring takes ~45 ms a frame under emulation, so the driver drops frames between).
-    timeout 300 tactile radius --camera /dev/video0 --seconds 12 --json \
-        >/tmp/live.json 2>/tmp/live.err || { cat /tmp/live.err; return 1; }
-    truth=$(tail -n 1 /tmp/truth-yuyv.csv | cut -d, -f3)
+    live_radius_check /dev/video0 Yuyv /tmp/truth-yuyv.csv
+    ok=$?
     # asking for a format the driver does not offer
     timeout 60 tactile radius --camera /dev/video0 --format mjpeg --count 5 --json \
         >/tmp/live-mjpeg.json 2>/tmp/live-mjpeg.err || { cat /tmp/live-mjpeg.err; return 1; }
     hilsim_stop
     v4l2-ctl -d /dev/video0 --set-fmt-video=width=640,height=480,pixelformat=GREY || return 1
-    cat /tmp/live.err /tmp/live-mjpeg.err
-    grep -q 'Yuyv 640x480$' /tmp/live.err || return 1
+    cat /tmp/live-mjpeg.err
+    [ "$ok" -eq 0 ] || return 1
     grep -q 'Yuyv 640x480 (asked for Mjpeg' /tmp/live-mjpeg.err || return 1
     [ "$(grep -o '"pixel_format":"Yuyv"' /tmp/live-mjpeg.json | wc -l)" -eq 5 ] || return 1
-    # one row per frame: contact, radius, driver timestamp, format, driver sequence (the
-    # keys of a row are in alphabetical order, "sequence" last)
-    tr ',' '\n' </tmp/live.json | awk -F: '/"contact":/ { c = $2 } /"radius_px":/ { r = $2 }
-        /"host_time_us":/ { t = $2 } /"pixel_format":/ { f = $2; gsub(/"/, "", f) }
-        /"sequence":/ { s = $2; gsub(/[^0-9]/, "", s); print c, r, t, f, s }' >/tmp/live.rows
-    awk 'NR % 20 == 1' /tmp/live.rows
-    rows=$(wc -l </tmp/live.rows)
-    [ "$rows" -ge 30 ] || { echo "only $rows frames in 12 s"; return 1; }
-    r=$(tail -n 1 /tmp/live.rows | cut -d' ' -f2)
-    detail "$(head -n 1 /tmp/live.err | cut -c1-80); $rows frames, $(grep -c '^false' /tmp/live.rows) without contact, the last $r px (rendered $truth px); MJPEG asked, YUYV chosen"
-    awk '$4 != "Yuyv" { print "format", $4, "at row", NR; exit 1 }
-        NR > 1 && ($5 <= seq || $3 <= t) { print "sequence or time not increasing at row", NR; exit 1 }
-        { seq = $5; t = $3 }' /tmp/live.rows || return 1
-    # frames without contact before the indentation, then contact
-    head -n 1 /tmp/live.rows | grep -q '^false' || return 1
-    # the last frame within 1 px of the rendered radius, as in camera_frames
-    awk "BEGIN { exit !(\"$r\" != \"null\" && $r > $truth - 1 && $r < $truth + 1) }"
+    detail "$(head -n 1 /tmp/live.err | cut -c1-60); $LIVE_DETAIL; MJPEG asked, YUYV chosen"
 }
 
 # v4l2loopback, the video loopback a workstation without a camera uses (docs/testing.md):
@@ -535,45 +525,15 @@ TOML
 # hil-sim writes). Checked as through vivid: the format, increasing sequence numbers and
 # timestamps, no contact before the indentation, the last radius within 1 px of the truth.
 case_loopback_camera() {
-    cat >/tmp/frames-loopback.toml <<'TOML'
-name = "vm-frames-loopback"
-duration_s = 60.0
-[camera]
-fps = 30.0
-[[programme]]
-at_s = 0.0
-request = { SetLed = { duty_per_10k = 10000 } }
-[[programme]]
-at_s = 0.0
-request = { SetPressure = { setpoint_kpa = 6.0 } }
-[[programme]]
-at_s = 6.0
-indent_to_mm = 1.5
-speed_mm_per_s = 1.0
-TOML
+    frames_scenario /tmp/frames-loopback.toml vm-frames-loopback 6.0
     [ -e /dev/video10 ] || { ls /dev/video*; return 1; }
-    cat /sys/class/video4linux/video10/name
     hilsim_start --scenario /tmp/frames-loopback.toml --camera-out /dev/video10 \
         --pacing realtime --camera-truth /tmp/truth-loopback.csv || return 1
-    timeout 300 tactile radius --camera /dev/video10 --seconds 12 --json \
-        >/tmp/loop.json 2>/tmp/loop.err || { cat /tmp/loop.err "$HILSIM_LOG"; return 1; }
-    truth=$(tail -n 1 /tmp/truth-loopback.csv | cut -d, -f3)
+    live_radius_check /dev/video10 Gray8 /tmp/truth-loopback.csv
+    ok=$?
     hilsim_stop
-    cat /tmp/loop.err
-    grep -q 'Gray8 640x480$' /tmp/loop.err || return 1
-    tr ',' '\n' </tmp/loop.json | awk -F: '/"contact":/ { c = $2 } /"radius_px":/ { r = $2 }
-        /"host_time_us":/ { t = $2 } /"pixel_format":/ { f = $2; gsub(/"/, "", f) }
-        /"sequence":/ { s = $2; gsub(/[^0-9]/, "", s); print c, r, t, f, s }' >/tmp/loop.rows
-    awk 'NR % 20 == 1' /tmp/loop.rows
-    rows=$(wc -l </tmp/loop.rows)
-    [ "$rows" -ge 30 ] || { echo "only $rows frames in 12 s"; return 1; }
-    r=$(tail -n 1 /tmp/loop.rows | cut -d' ' -f2)
-    detail "$(cat /sys/class/video4linux/video10/name): $rows frames, $(grep -c '^false' /tmp/loop.rows) without contact, the last $r px (rendered $truth px)"
-    awk '$4 != "Gray8" { print "format", $4, "at row", NR; exit 1 }
-        NR > 1 && ($5 <= seq || $3 <= t) { print "sequence or time not increasing at row", NR; exit 1 }
-        { seq = $5; t = $3 }' /tmp/loop.rows || return 1
-    head -n 1 /tmp/loop.rows | grep -q '^false' || return 1
-    awk "BEGIN { exit !(\"$r\" != \"null\" && $r > $truth - 1 && $r < $truth + 1) }"
+    detail "$(cat /sys/class/video4linux/video10/name): ${LIVE_DETAIL:-}"
+    [ "$ok" -eq 0 ]
 }
 
 # One frame from vivid's capture node as a PGM file.

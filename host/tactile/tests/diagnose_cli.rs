@@ -55,12 +55,18 @@ fn write_curves(
 
 /// Runs the diagnosis with `--json --out <file's dir>/out`.
 fn diagnose_json(file: &Path) -> serde_json::Value {
+    diagnose_json_with(file, &[])
+}
+
+/// [`diagnose_json`] with more arguments.
+fn diagnose_json_with(file: &Path, more: &[&std::ffi::OsStr]) -> serde_json::Value {
     let out_dir = file.with_file_name("out");
     let out = tactile()
         .args(["diagnose", "--json", "--bootstrap", "100", "--reruns", "3"])
         .arg(file)
         .arg("--out")
         .arg(&out_dir)
+        .args(more)
         .output()
         .expect("run tactile");
     assert!(
@@ -352,19 +358,7 @@ fn an_applied_diagnosis_corrects_the_next_samples_modulus() {
         11,
     );
     let model = dir.join("setup-model.json");
-    let out = tactile()
-        .args(["diagnose", "--json", "--bootstrap", "100", "--reruns", "3"])
-        .arg(&diagnosed)
-        .arg("--apply")
-        .arg(&model)
-        .output()
-        .expect("run tactile");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let d: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+    let d = diagnose_json_with(&diagnosed, &["--apply".as_ref(), model.as_os_str()]);
     assert_eq!(d["effect"], "finite_thickness", "{d:#}");
     let m: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&model).expect("model file")).expect("json");
