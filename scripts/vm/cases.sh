@@ -784,13 +784,13 @@ run calibrate_manometer
 run daemon_reconnects
 run vivid_loop
 run camera_frames
-run camera_formats
-run loopback_camera
 run calibrate_rigid
 run calibrate_camera
 run camera_latency
 run measure
 run daemon_measures
+run camera_formats
+run loopback_camera
 run camera_unplugged
 hilsim_stop
 bootrom_stop
