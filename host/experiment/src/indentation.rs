@@ -55,7 +55,9 @@ pub enum ExperimentError {
         last_kpa: f64,
         seconds: f64,
     },
-    #[error("the stage did not reach {target_mm:.3} mm within {seconds:.1} s")]
+    #[error(
+        "the stage did not reach {target_mm:.3} mm within {seconds:.1} s of the device's clock"
+    )]
     StageTimeout { target_mm: f64, seconds: f64 },
     #[error(
         "{port}: the device stopped sending ({silent_s:.1} s without a sample while streaming): unplugged or hung; everything received is in the record"
@@ -168,6 +170,10 @@ fn opt<T: std::fmt::Display>(v: Option<T>) -> String {
     v.map(|x| x.to_string()).unwrap_or_default()
 }
 
+/// How many times a stage move's time limit the wall clock allows before giving up on a
+/// device whose samples stopped (the limit itself is counted on the device's clock).
+const WALL_CLOCK_BACKSTOP: f64 = 5.0;
+
 /// Moves the stage and waits until it stops there, collecting everything meanwhile.
 #[allow(clippy::too_many_arguments)]
 fn move_stage(
@@ -187,8 +193,14 @@ fn move_stage(
         speed_steps_per_s: (speed_mm_per_s * units.stage_steps_per_mm()).round() as u32,
         accel_steps_per_s2: (50.0 * units.stage_steps_per_mm()).round() as u32,
     })?;
+    // The move's time limit runs on the device's clock (the samples' device time), so a
+    // device that runs behind the wall clock (an emulated controller on a busy host) is
+    // given the time it needs; the wall clock only backs it up for a device whose samples
+    // stop coming.
     let limit_s = distance_mm / speed_mm_per_s * 2.0 + 2.0;
+    let wall_limit_s = WALL_CLOCK_BACKSTOP * limit_s + 10.0;
     let start = host_clock::now_us();
+    let first_new = samples.len();
     loop {
         collect(
             link,
@@ -207,7 +219,17 @@ fn move_stage(
                 return Ok(());
             }
         }
-        if (host_clock::now_us() - start) as f64 * 1e-6 > limit_s {
+        let device_elapsed_s = match (samples.get(first_new), samples.last()) {
+            (Some(a), Some(b)) => {
+                b.sample
+                    .device_time_us
+                    .saturating_sub(a.sample.device_time_us) as f64
+                    * 1e-6
+            }
+            _ => 0.0,
+        };
+        let wall_elapsed_s = (host_clock::now_us() - start) as f64 * 1e-6;
+        if device_elapsed_s > limit_s || wall_elapsed_s > wall_limit_s {
             return Err(ExperimentError::StageTimeout {
                 target_mm,
                 seconds: limit_s,
