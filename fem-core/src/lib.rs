@@ -12,6 +12,7 @@ pub mod contact;
 pub mod contact_edge;
 pub mod curve;
 pub mod discretisation;
+pub mod edge_band;
 pub mod element;
 pub mod error;
 pub mod input_file;

@@ -194,7 +194,19 @@ pub fn add_shell_graded(
     grading: &ArcGrading,
     body: usize,
 ) -> ShellMesh {
-    let phis = with_midpoints(&grading.edges(div.arc));
+    add_shell_with_arc_edges(mesh, geometry, div, &grading.edges(div.arc), body)
+}
+
+/// Build the shell block into `mesh` as body `body`, with the element edges along the
+/// hemisphere given as polar angles from 0 (apex) to pi/2 (equator).
+pub fn add_shell_with_arc_edges(
+    mesh: &mut Mesh,
+    geometry: &ShellGeometry,
+    div: &ShellDivisions,
+    arc_edges: &[f64],
+    body: usize,
+) -> ShellMesh {
+    let phis = with_midpoints(arc_edges);
     let arc = (phis.len() - 1) / 2;
     let n_arc_nodes = 2 * arc + 1;
     let n1 = n_arc_nodes + 2 * div.skirt;
@@ -321,6 +333,77 @@ pub fn graded_edges_capped(
     edges
 }
 
+/// Element boundaries on [0, length] from a size field: the element starting at x has the
+/// size `size(y)` at its far end y (solved by fixed-point iteration, so a size that shrinks
+/// towards a refined window is reached before the window, not overshot); the last element
+/// is merged if it would be under half its size.
+pub fn edges_from_size_field(length: f64, size: impl Fn(f64) -> f64) -> Vec<f64> {
+    let mut edges = vec![0.0];
+    let mut x = 0.0;
+    while x < length - 1e-12 {
+        let mut h = size(x);
+        for _ in 0..30 {
+            // the smallest size over the element (sampled), so a window inside it counts
+            let h_new = (0..=8)
+                .map(|i| size(x + h * i as f64 / 8.0))
+                .fold(f64::INFINITY, f64::min);
+            if (h_new - h).abs() <= 1e-12 * h {
+                break;
+            }
+            h = h_new;
+        }
+        if x + 1.5 * h >= length {
+            edges.push(length);
+            break;
+        }
+        x += h;
+        edges.push(x);
+    }
+    edges
+}
+
+/// A size field that is `fine` inside [lo, hi] and grows geometrically by `growth` per
+/// element away from it (size = fine + (growth - 1) distance, the sizes of a geometric
+/// progression), never above `coarse(x)`.
+pub fn window_size(
+    x: f64,
+    lo: f64,
+    hi: f64,
+    fine: f64,
+    growth: f64,
+    coarse: impl Fn(f64) -> f64,
+) -> f64 {
+    let distance = (lo - x).max(x - hi).max(0.0);
+    (fine + (growth - 1.0) * distance).min(coarse(x))
+}
+
+/// The element edges `base` (increasing) with the elements over [lo, hi] replaced by ones
+/// of size `fine`, growing by `growth` per element back to the base sizes: only the base
+/// elements within the transition's reach are replaced, the others are kept as they are
+/// (so fields of the base mesh transfer exactly outside the refined stretch).
+pub fn refined_edges(base: &[f64], lo: f64, hi: f64, fine: f64, growth: f64) -> Vec<f64> {
+    let base_size = |y: f64| {
+        let i = base.partition_point(|&e| e <= y).clamp(1, base.len() - 1);
+        base[i] - base[i - 1]
+    };
+    // how far the sizes take to grow back to the base elements' at either end
+    let reach = |coarse: f64| (coarse - fine).max(0.0) / (growth - 1.0) + coarse;
+    let first = base
+        .partition_point(|&e| e <= lo - reach(base_size(lo)))
+        .saturating_sub(1);
+    let last = base
+        .partition_point(|&e| e < hi + reach(base_size(hi)))
+        .min(base.len() - 1);
+    let (start, end) = (base[first], base[last]);
+    let stretch = edges_from_size_field(end - start, |x| {
+        window_size(x + start, lo, hi, fine, growth, base_size)
+    });
+    let mut edges = base[..first].to_vec();
+    edges.extend(stretch.iter().map(|x| x + start));
+    edges.extend_from_slice(&base[last + 1..]);
+    edges
+}
+
 /// Node positions (element edges plus mid points) from element edges.
 fn with_midpoints(edges: &[f64]) -> Vec<f64> {
     let mut out = Vec::with_capacity(2 * edges.len() - 1);
@@ -341,22 +424,36 @@ pub fn add_sample(
     grading: &SampleGrading,
     body: usize,
 ) -> SampleMesh {
-    let r_nodes = with_midpoints(&graded_edges(
+    let r_edges = graded_edges(
         geometry.radius_mm,
         grading.fine_size_mm,
         grading.fine_radius_mm,
         grading.growth,
-    ));
-    // depth below the top surface, then ordered bottom -> top
-    let mut z_nodes: Vec<f64> = with_midpoints(&graded_edges(
+    );
+    let depth_edges = graded_edges(
         geometry.thickness_mm,
         grading.fine_depth_size_mm,
         grading.fine_depth_mm,
         grading.growth,
-    ))
-    .into_iter()
-    .map(|d| geometry.top_z_mm - d)
-    .collect();
+    );
+    add_sample_with_edges(mesh, geometry, &r_edges, &depth_edges, body)
+}
+
+/// Build the sample block into `mesh` as body `body` from its element edges: radii from the
+/// axis outwards, depths below the top surface.
+pub fn add_sample_with_edges(
+    mesh: &mut Mesh,
+    geometry: &SampleGeometry,
+    r_edges: &[f64],
+    depth_edges: &[f64],
+    body: usize,
+) -> SampleMesh {
+    let r_nodes = with_midpoints(r_edges);
+    // depth below the top surface, then ordered bottom -> top
+    let mut z_nodes: Vec<f64> = with_midpoints(depth_edges)
+        .into_iter()
+        .map(|d| geometry.top_z_mm - d)
+        .collect();
     z_nodes.reverse();
     let n1 = r_nodes.len();
     let n2 = z_nodes.len();
@@ -380,6 +477,37 @@ mod tests {
         assert!((e[e.len() - 1] - 45.0).abs() < 1e-12);
         assert!(e.windows(2).all(|w| w[1] > w[0]));
         assert!((e[1] - 0.1).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_refined_stretch_keeps_the_base_elements_beyond_its_reach() {
+        let base = graded_edges(45.0, 0.2, 4.5, 1.3);
+        let e = refined_edges(&base, 1.7, 2.3, 0.025, 1.3);
+        assert_eq!(e[0], 0.0);
+        assert!((e[e.len() - 1] - 45.0).abs() < 1e-12);
+        assert!(e.windows(2).all(|w| w[1] > w[0]));
+        // inside the stretch: elements of the fine size (the last one before the growth
+        // may be stretched by up to half)
+        let inside: Vec<f64> = e
+            .windows(2)
+            .filter(|w| w[0] >= 1.7 && w[1] <= 2.3)
+            .map(|w| w[1] - w[0])
+            .collect();
+        assert!(inside.len() >= 20);
+        assert!(inside.iter().all(|&h| h <= 0.025 * 1.5 + 1e-12));
+        // neighbours grow by at most the growth ratio (1.5 at a merged last element)
+        assert!(e.windows(3).all(|w| {
+            let (h0, h1) = (w[1] - w[0], w[2] - w[1]);
+            h1 / h0 <= 1.5 + 1e-9 && h0 / h1 <= 1.5 + 1e-9
+        }));
+        // beyond the growth's reach ((0.2 - 0.025) / 0.3 + 0.2 = 0.78 mm) the base edges
+        // are kept exactly
+        for kept in base
+            .iter()
+            .filter(|&&b| !(1.7 - 0.8..=2.3 + 0.8).contains(&b))
+        {
+            assert!(e.contains(kept), "base edge {kept} kept");
+        }
     }
 
     #[test]

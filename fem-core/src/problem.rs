@@ -21,11 +21,13 @@ use crate::FemError;
 use crate::contact::ContactPair;
 use crate::contact_edge::contact_edge_mm;
 use crate::curve::{ContactPressureSample, Curve, CurveParams, CurvePoint};
+use crate::edge_band::{EdgeBand, GridBlock, interpolate_linear, transfer_block};
 use crate::element::Formulation;
 use crate::material::Material;
 use crate::mesh::{
     ArcGrading, Mesh, SampleGeometry, SampleGrading, SampleMesh, ShellDivisions, ShellGeometry,
-    ShellMesh, add_sample, add_shell_graded,
+    ShellMesh, add_sample, add_sample_with_edges, add_shell_with_arc_edges, graded_edges,
+    refined_edges,
 };
 use crate::model::{Model, NewtonFailure, NewtonSettings};
 
@@ -63,6 +65,63 @@ pub struct MeshSpec {
     pub sample_fine_radius_mm: f64,
     pub sample_fine_depth_mm: f64,
     pub sample_growth: f64,
+    /// A band of fine elements around where the contact edge is (none: the graded mesh
+    /// above only).
+    pub edge_window: Option<EdgeWindow>,
+}
+
+/// A band of fine elements around the contact edge, in reference coordinates, on both
+/// contact surfaces; the sample's top layer is refined into depth to the same size. Away
+/// from the band the element sizes grow geometrically back to those of the [`MeshSpec`],
+/// and the elements beyond the growth's reach are those of the mesh without the band.
+/// The mesh of the converged reference in docs/fem-verification.md ("A band of fine
+/// elements at the edge").
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EdgeWindow {
+    /// Polar angles (rad) of the shell's arc between which its elements are fine.
+    pub shell_angle_rad: [f64; 2],
+    /// Radii (mm) of the sample's top between which its elements are fine.
+    pub sample_radius_mm: [f64; 2],
+    /// Element size inside the band (mm), along the shell's outer surface and the
+    /// sample's top.
+    pub fine_size_mm: f64,
+    /// Element size through the sample's top layer (mm), under the whole top surface.
+    pub depth_size_mm: f64,
+    /// Ratio of neighbouring element sizes away from the band.
+    pub growth: f64,
+}
+
+impl EdgeWindow {
+    /// A band over the current radii `extent_mm`, placed at the material points that are
+    /// there (the shell's flattened cap keeps its arc length to within its small membrane
+    /// strain, so its polar angle at radius r is r / R1; the sample's top moves radially by
+    /// a few um).
+    pub fn over(extent_mm: [f64; 2], fine_size_mm: f64, depth_size_mm: f64) -> Self {
+        Self {
+            shell_angle_rad: extent_mm.map(|r| r / SHELL_OUTER_RADIUS_MM),
+            sample_radius_mm: extent_mm,
+            fine_size_mm,
+            depth_size_mm,
+            growth: 1.3,
+        }
+    }
+
+    /// A band of half-width `half_width_mm` around the contact edge at radius `a_mm`, as
+    /// fine into the sample's depth as along the surfaces.
+    pub fn around_edge(a_mm: f64, half_width_mm: f64, fine_size_mm: f64) -> Self {
+        Self::over(
+            [a_mm - half_width_mm, a_mm + half_width_mm],
+            fine_size_mm,
+            fine_size_mm,
+        )
+    }
+
+    /// Element size of the contact surfaces where the edge is (the contact penalty's and
+    /// smoothing's length scale).
+    pub fn contact_size_mm(spec: &MeshSpec) -> f64 {
+        spec.edge_window
+            .map_or(spec.sample_fine_size_mm, |w| w.fine_size_mm)
+    }
 }
 
 impl MeshSpec {
@@ -98,6 +157,7 @@ impl MeshSpec {
             sample_fine_radius_mm: 4.5,
             sample_fine_depth_mm: 1.0,
             sample_growth: 1.3,
+            edge_window: None,
         }
     }
 }
@@ -153,6 +213,9 @@ pub struct SolverSettings {
     pub shell_skirt_mm: f64,
     /// Contact discretisation (see [`ContactPasses`]).
     pub contact_passes: ContactPasses,
+    /// A band of fine elements that follows the contact edge (frictionless curves; see
+    /// [`crate::edge_band`]); none: the mesh above throughout.
+    pub edge_band: Option<EdgeBand>,
 }
 
 impl SolverSettings {
@@ -170,7 +233,21 @@ impl SolverSettings {
             stall_iterations: 12,
             shell_skirt_mm: SHELL_SKIRT_MM,
             contact_passes: ContactPasses::SampleSlave,
+            edge_band: None,
         }
+    }
+
+    /// These settings with the mesh's band over `extent_mm` (see [`EdgeBand`]) and the
+    /// augmentation's penetration tolerance scaled to the band's element size.
+    fn with_band(&self, band: &EdgeBand, extent_mm: [f64; 2]) -> Self {
+        let mut s = self.clone();
+        s.mesh.edge_window = Some(EdgeWindow::over(
+            extent_mm,
+            band.fine_size_mm,
+            band.depth_size_mm,
+        ));
+        s.penetration_tolerance_mm = 5e-4 * band.fine_size_mm;
+        s
     }
 }
 
@@ -294,6 +371,12 @@ pub struct Indentation {
     /// Set when the last committed step reached a new branch: the secant predictor must
     /// not extrapolate the jump.
     new_branch: bool,
+    /// Times the band of fine elements moved with the contact edge, and moves that did not
+    /// converge (retried at the next step); see [`crate::edge_band`].
+    pub band_moves: usize,
+    pub band_move_failures: usize,
+    /// The radii (mm) the band of fine elements covers on this mesh, if it has one.
+    pub band_extent_mm: Option<[f64; 2]>,
 }
 
 /// Diagnostic record of one attempted stage-2 step: the target travel, whether it
@@ -314,35 +397,58 @@ impl Indentation {
         sample_top_z_mm: Option<f64>,
     ) -> Self {
         let mut mesh = Mesh::default();
-        let shell = add_shell_graded(
-            &mut mesh,
-            &ShellGeometry {
-                inner_radius_mm: SHELL_OUTER_RADIUS_MM - SHELL_WALL_MM,
-                outer_radius_mm: SHELL_OUTER_RADIUS_MM,
-                skirt_length_mm: settings.shell_skirt_mm,
-            },
-            &settings.mesh.shell,
-            &settings.mesh.shell_arc_grading,
-            0,
-        );
+        let shell_geometry = ShellGeometry {
+            inner_radius_mm: SHELL_OUTER_RADIUS_MM - SHELL_WALL_MM,
+            outer_radius_mm: SHELL_OUTER_RADIUS_MM,
+            skirt_length_mm: settings.shell_skirt_mm,
+        };
+        let spec = &settings.mesh;
+        let arc_edges = spec.shell_arc_grading.edges(spec.shell.arc);
+        let arc_edges = match &spec.edge_window {
+            None => arc_edges,
+            Some(w) => {
+                let [lo, hi] = w.shell_angle_rad;
+                let fine_rad = w.fine_size_mm / SHELL_OUTER_RADIUS_MM;
+                refined_edges(&arc_edges, lo, hi, fine_rad, w.growth)
+            }
+        };
+        let shell =
+            add_shell_with_arc_edges(&mut mesh, &shell_geometry, &spec.shell, &arc_edges, 0);
         let grading = SampleGrading {
-            fine_size_mm: settings.mesh.sample_fine_size_mm,
-            fine_depth_size_mm: settings.mesh.sample_depth_size_mm,
-            fine_radius_mm: settings.mesh.sample_fine_radius_mm,
-            fine_depth_mm: settings.mesh.sample_fine_depth_mm,
-            growth: settings.mesh.sample_growth,
+            fine_size_mm: spec.sample_fine_size_mm,
+            fine_depth_size_mm: spec.sample_depth_size_mm,
+            fine_radius_mm: spec.sample_fine_radius_mm,
+            fine_depth_mm: spec.sample_fine_depth_mm,
+            growth: spec.sample_growth,
         };
         let sample = sample_top_z_mm.map(|top_z_mm| {
-            add_sample(
-                &mut mesh,
-                &SampleGeometry {
-                    radius_mm: params.sample_radius_mm,
-                    thickness_mm: params.sample_thickness_mm,
-                    top_z_mm,
-                },
-                &grading,
-                1,
-            )
+            let geometry = SampleGeometry {
+                radius_mm: params.sample_radius_mm,
+                thickness_mm: params.sample_thickness_mm,
+                top_z_mm,
+            };
+            match &spec.edge_window {
+                None => add_sample(&mut mesh, &geometry, &grading, 1),
+                Some(w) => {
+                    let r_base = graded_edges(
+                        geometry.radius_mm,
+                        grading.fine_size_mm,
+                        grading.fine_radius_mm,
+                        grading.growth,
+                    );
+                    let depth_base = graded_edges(
+                        geometry.thickness_mm,
+                        grading.fine_depth_size_mm,
+                        grading.fine_depth_mm,
+                        grading.growth,
+                    );
+                    let [lo, hi] = w.sample_radius_mm;
+                    let r_edges = refined_edges(&r_base, lo, hi, w.fine_size_mm, w.growth);
+                    let depth_edges =
+                        refined_edges(&depth_base, 0.0, 0.0, w.depth_size_mm, w.growth);
+                    add_sample_with_edges(&mut mesh, &geometry, &r_edges, &depth_edges, 1)
+                }
+            }
         });
         let materials = vec![
             Material::from_young_poisson(
@@ -372,12 +478,13 @@ impl Indentation {
         model.pressure_surface = shell.inner_surface.clone();
         if let Some(s) = &sample {
             let soft_kpa = params.shell_modulus_kpa.min(params.sample_modulus_kpa);
-            let penalty = settings.penalty_factor * soft_kpa / settings.mesh.sample_fine_size_mm;
+            let contact_size_mm = EdgeWindow::contact_size_mm(&settings.mesh);
+            let penalty = settings.penalty_factor * soft_kpa / contact_size_mm;
             // slave: the sample's top; master: the shell's outer surface from the equator
             // to the apex (outward normal pointing out of the shell)
             let mut masters = shell.outer_surface.clone();
             masters.reverse();
-            let smoothing = settings.contact_smoothing * settings.mesh.sample_fine_size_mm;
+            let smoothing = settings.contact_smoothing * contact_size_mm;
             if let ContactPasses::SampleEdgeQuadrature { points_per_edge } = settings.contact_passes
             {
                 model.contacts.push(ContactPair::with_edge_quadrature(
@@ -456,6 +563,9 @@ impl Indentation {
             stage1_stats: Default::default(),
             snap_through_path: Vec::new(),
             new_branch: false,
+            band_moves: 0,
+            band_move_failures: 0,
+            band_extent_mm: None,
         }
     }
 
@@ -672,6 +782,106 @@ impl Indentation {
                 .solve_equilibrium_bordered(u, p_kpa, h, load_dofs, constraint, 1.0, target)
                 .map(|_| ())
         })
+    }
+
+    /// Grid coordinates of the shell block's nodes: along the first direction the polar
+    /// angle of the arc's nodes, then pi/2 + z along the skirt; through the wall the node
+    /// index (the same on every mesh of a level).
+    fn shell_grid(&self) -> (Vec<f64>, Vec<f64>) {
+        let b = self.shell.block;
+        let nodes = &self.model.mesh.nodes;
+        let along = (0..b.n1)
+            .map(|i| {
+                let [x, z] = nodes[b.node(i, 0)];
+                if z <= 0.0 {
+                    x.atan2(-z)
+                } else {
+                    std::f64::consts::FRAC_PI_2 + z
+                }
+            })
+            .collect();
+        (along, (0..b.n2).map(|j| j as f64).collect())
+    }
+
+    /// Grid coordinates of the sample block's nodes: r, then z.
+    fn sample_grid(&self) -> Option<(Vec<f64>, Vec<f64>)> {
+        let b = self.sample.as_ref()?.block;
+        let nodes = &self.model.mesh.nodes;
+        Some((
+            (0..b.n1).map(|i| nodes[b.node(i, 0)][0]).collect(),
+            (0..b.n2).map(|j| nodes[b.node(0, j)][1]).collect(),
+        ))
+    }
+
+    /// The state `u` of `old` (a model of the same problem on another mesh) carried over to
+    /// this one: displacements interpolated at the new nodes, contact multipliers from the
+    /// old contact pressure at the new slave nodes, tube travel `h_mm`. The diagnostic logs
+    /// continue.
+    fn take_over(&mut self, old: &mut Indentation, u: &[f64], h_mm: f64) -> Vec<f64> {
+        let mut u_new = vec![0.0; self.model.n_dofs()];
+        let (old_1, old_2) = old.shell_grid();
+        let (new_1, new_2) = self.shell_grid();
+        transfer_block(
+            &GridBlock {
+                block: &old.shell.block,
+                along_1: &old_1,
+                along_2: &old_2,
+            },
+            u,
+            &GridBlock {
+                block: &self.shell.block,
+                along_1: &new_1,
+                along_2: &new_2,
+            },
+            &mut u_new,
+        );
+        if let (Some(o), Some(n), Some((old_1, old_2)), Some((new_1, new_2))) = (
+            &old.sample,
+            &self.sample,
+            old.sample_grid(),
+            self.sample_grid(),
+        ) {
+            transfer_block(
+                &GridBlock {
+                    block: &o.block,
+                    along_1: &old_1,
+                    along_2: &old_2,
+                },
+                u,
+                &GridBlock {
+                    block: &n.block,
+                    along_1: &new_1,
+                    along_2: &new_2,
+                },
+                &mut u_new,
+            );
+        }
+        self.set_tube_travel(h_mm);
+        self.model.apply_prescribed(&mut u_new);
+        let old_nodes = &old.model.mesh.nodes;
+        for (new, pair) in self.model.contacts.iter_mut().zip(&old.model.contacts) {
+            // node-to-segment pairs: one constraint point per slave node
+            if new.points.len() != new.slaves.len() || pair.points.len() != pair.slaves.len() {
+                continue;
+            }
+            let r_old: Vec<f64> = pair.slaves.iter().map(|&n| old_nodes[n][0]).collect();
+            let q_old: Vec<f64> = pair
+                .multipliers
+                .iter()
+                .zip(&pair.slave_areas_mm2)
+                .map(|(m, a)| m / a)
+                .collect();
+            for s in 0..new.slaves.len() {
+                let r = self.model.mesh.nodes[new.slaves[s]][0];
+                new.multipliers[s] = interpolate_linear(&r_old, &q_old, r) * new.slave_areas_mm2[s];
+            }
+        }
+        self.attempts = std::mem::take(&mut old.attempts);
+        self.snap_through_path = std::mem::take(&mut old.snap_through_path);
+        self.stage1_stats = old.stage1_stats.clone();
+        self.band_moves = old.band_moves;
+        self.band_move_failures = old.band_move_failures;
+        u_new
     }
 
     /// Curve outputs at the state `u`.
@@ -899,7 +1109,15 @@ pub(crate) fn solve_stages(
     let started = Instant::now();
 
     // stage 1: inflation of the shell alone
-    let mut stage1 = Indentation::build(params, settings, None);
+    // the band that follows the contact edge starts at the axis (and refines the shell of
+    // stage 1 too, whose state stage 2 continues)
+    let band = settings.edge_band.filter(|_| params.friction == 0.0);
+    let mut band_extent = band.map(|b| b.extent(0.0));
+    let mut current = match (&band, &band_extent) {
+        (Some(b), Some(extent)) => settings.with_band(b, *extent),
+        _ => settings.clone(),
+    };
+    let mut stage1 = Indentation::build(params, &current, None);
     tune(&mut stage1.model.newton);
     let mut u = vec![0.0; stage1.model.n_dofs()];
     let rest_volume_mm3 = stage1.model.enclosed_volume(&u);
@@ -927,7 +1145,8 @@ pub(crate) fn solve_stages(
     let top_z_mm = stage1.model.position(&u, outer_apex)[1];
 
     // stage 2: shell + sample, tube travel h with the pressure held
-    let mut ind = Indentation::build(params, settings, Some(top_z_mm));
+    let mut ind = Indentation::build(params, &current, Some(top_z_mm));
+    ind.band_extent_mm = band_extent;
     ind.stage1_stats = stage1.model.stats.clone();
     tune(&mut ind.model.newton);
     for c in &mut ind.model.contacts {
@@ -942,6 +1161,47 @@ pub(crate) fn solve_stages(
     for k in 1..=params.steps {
         let h_from = dh * (k - 1) as f64;
         let h_to = dh * k as f64;
+        // move the band ahead of an edge about to leave it: a new mesh, the state carried
+        // over and re-equilibrated at the present travel; if that fails the old mesh goes
+        // on (its band still holds the edge for a while) and the move is tried again at the
+        // next step, unless the edge has already reached the band's outer end
+        if let (Some(b), Some(extent), [.., before, last]) = (&band, band_extent, &points[..]) {
+            let predicted = last.a_mm + (last.a_mm - before.a_mm).max(0.0);
+            if !b.holds(extent, predicted) {
+                let moved_to = b.extent(predicted + 0.25 * b.half_width_mm);
+                let next = settings.with_band(b, moved_to);
+                let mut moved = Indentation::build(params, &next, Some(top_z_mm));
+                tune(&mut moved.model.newton);
+                let mut moved_state = moved.take_over(&mut ind, &state, h_from);
+                match moved.solve_step(&mut moved_state, h_from, params.pressure_kpa, &next) {
+                    Ok(()) => {
+                        ind = moved;
+                        state = moved_state;
+                        current = next;
+                        band_extent = Some(moved_to);
+                        ind.band_moves += 1;
+                        ind.band_extent_mm = band_extent;
+                    }
+                    Err(failure) => {
+                        ind.attempts = std::mem::take(&mut moved.attempts);
+                        ind.snap_through_path = std::mem::take(&mut moved.snap_through_path);
+                        ind.band_move_failures += 1;
+                        if last.a_mm > extent[1] - 0.25 * b.half_width_mm {
+                            let e = FemError::NoConvergence {
+                                stage: "stage 2 (moving the edge band)",
+                                load: format!("{h_from:.6} mm of tube travel"),
+                                detail: failure.to_string(),
+                            };
+                            if allow_truncation {
+                                stop = Some(e);
+                                break;
+                            }
+                            return Err(e);
+                        }
+                    }
+                }
+            }
+        }
         let saved: Vec<Vec<f64>> = ind
             .model
             .contacts
@@ -954,20 +1214,20 @@ pub(crate) fn solve_stages(
             h_from,
             h_to,
             dh,
-            settings.max_cuts,
+            current.max_cuts,
             &mut state,
             |h, s, cuts| {
                 let mut ind = ind_cell.borrow_mut();
                 // early give-up only while cutting is still cheap; after a few consecutive
                 // cuts Newton gets its full iteration budget,
                 ind.model.newton.stall_iterations = if cuts < STALL_CUTS {
-                    settings.stall_iterations
+                    current.stall_iterations
                 } else {
                     usize::MAX
                 };
                 // and indefinite tangents (a limit point) get the pivoting LU
                 ind.model.set_indefinite_with_lu(cuts >= STALL_CUTS);
-                ind.solve_step(s, h, params.pressure_kpa, settings)
+                ind.solve_step(s, h, params.pressure_kpa, &current)
             },
             || {
                 let mut ind = ind_cell.borrow_mut();
@@ -998,7 +1258,7 @@ pub(crate) fn solve_stages(
             },
             |from, to, s: &[f64]| {
                 let mut ind = ind_cell.borrow_mut();
-                ind.trace_snap_through(s, from, to, params.pressure_kpa, settings, apex_z0_mm)
+                ind.trace_snap_through(s, from, to, params.pressure_kpa, &current, apex_z0_mm)
                     .ok()
             },
             "stage 2 (indentation)",

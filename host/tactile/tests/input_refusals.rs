@@ -258,3 +258,27 @@ fn a_measurement_that_fails_after_connecting_leaves_no_empty_record_folder() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn an_edge_band_with_friction_is_refused_before_solving() {
+    let dir = scratch("edge-band-friction");
+    let out = tactile()
+        .args([
+            "fem",
+            "curve",
+            "--modulus",
+            "100",
+            "--pressure",
+            "6",
+            "--friction",
+            "0.3",
+            "--edge-band",
+            "--out",
+        ])
+        .arg(dir.join("curve.csv"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(stderr(&out).contains("--edge-band needs a frictionless curve"));
+    assert!(!dir.join("curve.csv").exists());
+}

@@ -1,0 +1,87 @@
+//! The band of fine elements that follows the contact edge (`fem_core::edge_band`).
+
+use fem_core::edge_band::EdgeBand;
+use fem_core::problem::EdgeWindow;
+use fem_core::{CurveParams, Simulation};
+
+/// A band coarser than the production one, so the test stays fast; the mechanics of moving
+/// it are the same.
+const BAND: EdgeBand = EdgeBand {
+    fine_size_mm: 0.05,
+    half_width_mm: 0.3,
+    depth_size_mm: 0.1,
+};
+
+fn params(depth_mm: f64, steps: usize) -> CurveParams {
+    CurveParams {
+        sample_modulus_kpa: 200.0,
+        pressure_kpa: 6.0,
+        max_depth_mm: depth_mm,
+        steps,
+        ..Default::default()
+    }
+}
+
+/// The frictionless problem is path independent, so a curve whose band moved with the edge
+/// (meshes rebuilt, states interpolated and re-solved) must end in the same equilibrium as a
+/// curve solved throughout on its last mesh: same a, load and u_s up to the solver's
+/// tolerances. An error in the transfer or a state left over from the old meshes shows
+/// here.
+#[test]
+fn a_band_moved_along_the_curve_ends_where_a_fixed_band_does() {
+    let mut moving = Simulation::new(&params(0.5, 10));
+    moving.discretisation.edge_band = Some(BAND);
+    let moving = moving.solve().unwrap();
+    let extent = moving.indentation.band_extent_mm.unwrap();
+    assert!(
+        moving.indentation.band_moves >= 2,
+        "the edge travels ~1.5 mm: the band moved {} times",
+        moving.indentation.band_moves
+    );
+    let end = moving.complete().unwrap();
+    let end = end.points.last().unwrap();
+
+    let mut fixed = Simulation::new(&params(0.5, 10));
+    fixed.discretisation.mesh.edge_window = Some(EdgeWindow::over(
+        extent,
+        BAND.fine_size_mm,
+        BAND.depth_size_mm,
+    ));
+    fixed.nonlinear_solver.penetration_tolerance_mm = 5e-4 * BAND.fine_size_mm;
+    let fixed = fixed.solve().unwrap().complete().unwrap();
+    let reference = fixed.points.last().unwrap();
+    // the two paths reach the equilibrium within the augmented-Lagrangian tolerance (25 nm
+    // of penetration) and Newton's: measured 16 nm in a, 2e-7 in the load, 1.5e-8 mm in u_s;
+    // the bounds are a few times that and far below the band's own discretisation error
+    // (~1 um in a), which a wrong transfer would exceed
+    assert!(
+        (end.a_mm - reference.a_mm).abs() < 1e-4,
+        "a {} vs {}",
+        end.a_mm,
+        reference.a_mm
+    );
+    assert!((end.load_n / reference.load_n - 1.0).abs() < 1e-5);
+    assert!((end.u_s_mm - reference.u_s_mm).abs() < 1e-6);
+}
+
+/// With friction the slip history matters and is not carried to a new mesh: the band is
+/// not used (the curve is the plain mesh's).
+#[test]
+fn frictional_curves_keep_the_plain_mesh() {
+    let p = CurveParams {
+        friction: 0.3,
+        mesh_level: -2,
+        ..params(0.3, 3)
+    };
+    let mut sim = Simulation::new(&p);
+    sim.discretisation.edge_band = Some(BAND);
+    let banded = sim.solve().unwrap();
+    let plain = Simulation::new(&p).solve().unwrap();
+    assert_eq!(banded.indentation.band_moves, 0);
+    assert_eq!(banded.indentation.band_extent_mm, None);
+    assert_eq!(
+        banded.indentation.model.n_dofs(),
+        plain.indentation.model.n_dofs()
+    );
+    assert_eq!(banded.curve.points, plain.curve.points);
+}
