@@ -1,5 +1,5 @@
 //! Convergence of the contact radius a on meshes with a band of fine elements around the
-//! contact edge (`MeshSpec::edge_window`, `EdgeWindow::around_edge`), against the
+//! contact edge (`MeshSpec::edge_window`, placed by `EdgeBand::extent`), against the
 //! production mesh.
 //!
 //! `cargo run --release -p fem-core --example edge_window -- E2_kpa p_air_kpa h_list_mm
@@ -7,11 +7,13 @@
 //!
 //! For every travel h: the production curve's a (steps of 0.05 mm), then a, load P and apex
 //! displacement u_s at h from a curve solved to h (same steps) on a mesh whose band of
-//! elements of each fine size is centred on the production edge at h (a band fixed for
-//! the whole curve: the frictionless problem is path independent, so only the mesh at h
+//! elements of each fine size (along the surfaces and into the sample's depth) is placed
+//! around the production edge at h as `EdgeBand::extent` places it (a band fixed for the
+//! whole curve: the frictionless problem is path independent, so only the mesh at h
 //! matters). Last columns: production minus finest, the differences of successive sizes
 //! and the observed order p = log2(d_k / d_k+1) of the last three.
 
+use fem_core::edge_band::EdgeBand;
 use fem_core::problem::EdgeWindow;
 use fem_core::{CurveParams, Simulation};
 
@@ -53,8 +55,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let mut line = format!("h = {h:.2} mm: production a {a0:.5}");
         for &size in &sizes {
             let mut sim = Simulation::new(&params(h));
+            let band = EdgeBand {
+                fine_size_mm: size,
+                half_width_mm: half_width,
+                depth_size_mm: size,
+            };
             sim.discretisation.mesh.edge_window =
-                Some(EdgeWindow::around_edge(a0, half_width, size));
+                Some(EdgeWindow::over(band.extent(a0), size, size));
             sim.nonlinear_solver.penetration_tolerance_mm = 5e-4 * size;
             let solution = sim.solve()?;
             let dofs = solution.indentation.model.n_dofs();

@@ -106,16 +106,6 @@ impl EdgeWindow {
         }
     }
 
-    /// A band of half-width `half_width_mm` around the contact edge at radius `a_mm`, as
-    /// fine into the sample's depth as along the surfaces.
-    pub fn around_edge(a_mm: f64, half_width_mm: f64, fine_size_mm: f64) -> Self {
-        Self::over(
-            [a_mm - half_width_mm, a_mm + half_width_mm],
-            fine_size_mm,
-            fine_size_mm,
-        )
-    }
-
     /// Element size of the contact surfaces where the edge is (the contact penalty's and
     /// smoothing's length scale).
     pub fn contact_size_mm(spec: &MeshSpec) -> f64 {
@@ -375,8 +365,8 @@ pub struct Indentation {
     /// converge (retried at the next step); see [`crate::edge_band`].
     pub band_moves: usize,
     pub band_move_failures: usize,
-    /// The radii (mm) the band of fine elements covers on this mesh, if it has one.
-    pub band_extent_mm: Option<[f64; 2]>,
+    /// The band of fine elements of this mesh, if it has one.
+    pub edge_window: Option<EdgeWindow>,
 }
 
 /// Diagnostic record of one attempted stage-2 step: the target travel, whether it
@@ -565,7 +555,7 @@ impl Indentation {
             new_branch: false,
             band_moves: 0,
             band_move_failures: 0,
-            band_extent_mm: None,
+            edge_window: settings.mesh.edge_window,
         }
     }
 
@@ -782,6 +772,36 @@ impl Indentation {
                 .solve_equilibrium_bordered(u, p_kpa, h, load_dofs, constraint, 1.0, target)
                 .map(|_| ())
         })
+    }
+
+    /// The band of fine elements over the current radii `extent_mm` in the state `u`,
+    /// placed at the material points that are there now: the shell's outer surface and the
+    /// sample's top map current radii to reference polar angles and radii through their
+    /// nodes (linear between nodes, which the band's width absorbs).
+    fn band_over(&self, u: &[f64], extent_mm: [f64; 2], band: &EdgeBand) -> EdgeWindow {
+        let model = &self.model;
+        let to_reference = |surface: &[usize], coordinate: &dyn Fn([f64; 2]) -> f64, r: f64| {
+            if r <= 0.0 {
+                return 0.0;
+            }
+            let current: Vec<f64> = surface.iter().map(|&n| model.position(u, n)[0]).collect();
+            let k = current
+                .iter()
+                .position(|&c| c > r)
+                .unwrap_or(current.len() - 1)
+                .max(1);
+            let t = (r - current[k - 1]) / (current[k] - current[k - 1]);
+            let c0 = coordinate(model.mesh.nodes[surface[k - 1]]);
+            let c1 = coordinate(model.mesh.nodes[surface[k]]);
+            c0 + t * (c1 - c0)
+        };
+        let mut window = EdgeWindow::over(extent_mm, band.fine_size_mm, band.depth_size_mm);
+        window.shell_angle_rad =
+            extent_mm.map(|r| to_reference(&self.shell.outer_surface, &|[x, z]| x.atan2(-z), r));
+        if let Some(sample) = &self.sample {
+            window.sample_radius_mm = extent_mm.map(|r| to_reference(&sample.top, &|[x, _]| x, r));
+        }
+        window
     }
 
     /// Grid coordinates of the shell block's nodes: along the first direction the polar
@@ -1146,7 +1166,6 @@ pub(crate) fn solve_stages(
 
     // stage 2: shell + sample, tube travel h with the pressure held
     let mut ind = Indentation::build(params, &current, Some(top_z_mm));
-    ind.band_extent_mm = band_extent;
     ind.stage1_stats = stage1.model.stats.clone();
     tune(&mut ind.model.newton);
     for c in &mut ind.model.contacts {
@@ -1168,10 +1187,13 @@ pub(crate) fn solve_stages(
         if let (Some(b), Some(extent), [.., before, last]) = (&band, band_extent, &points[..]) {
             let predicted = last.a_mm + (last.a_mm - before.a_mm).max(0.0);
             if !b.holds(extent, predicted) {
-                let moved_to = b.extent(predicted + 0.25 * b.half_width_mm);
-                let next = settings.with_band(b, moved_to);
+                let moved_to = b.extent(predicted);
+                let mut next = settings.with_band(b, moved_to);
+                next.mesh.edge_window = Some(ind.band_over(&state, moved_to, b));
                 let mut moved = Indentation::build(params, &next, Some(top_z_mm));
                 tune(&mut moved.model.newton);
+                // one solve without cutting: Newton gets its full iteration budget
+                moved.model.newton.stall_iterations = usize::MAX;
                 let mut moved_state = moved.take_over(&mut ind, &state, h_from);
                 match moved.solve_step(&mut moved_state, h_from, params.pressure_kpa, &next) {
                     Ok(()) => {
@@ -1180,13 +1202,15 @@ pub(crate) fn solve_stages(
                         current = next;
                         band_extent = Some(moved_to);
                         ind.band_moves += 1;
-                        ind.band_extent_mm = band_extent;
                     }
                     Err(failure) => {
                         ind.attempts = std::mem::take(&mut moved.attempts);
                         ind.snap_through_path = std::mem::take(&mut moved.snap_through_path);
                         ind.band_move_failures += 1;
-                        if last.a_mm > extent[1] - 0.25 * b.half_width_mm {
+                        let margin = 0.25 * b.half_width_mm;
+                        if last.a_mm > extent[1] - margin
+                            || (extent[0] > 0.0 && last.a_mm < extent[0] + margin)
+                        {
                             let e = FemError::NoConvergence {
                                 stage: "stage 2 (moving the edge band)",
                                 load: format!("{h_from:.6} mm of tube travel"),

@@ -1,7 +1,6 @@
 //! The band of fine elements that follows the contact edge (`fem_core::edge_band`).
 
 use fem_core::edge_band::EdgeBand;
-use fem_core::problem::EdgeWindow;
 use fem_core::{CurveParams, Simulation};
 
 /// A band coarser than the production one, so the test stays fast; the mechanics of moving
@@ -32,7 +31,7 @@ fn a_band_moved_along_the_curve_ends_where_a_fixed_band_does() {
     let mut moving = Simulation::new(&params(0.5, 10));
     moving.discretisation.edge_band = Some(BAND);
     let moving = moving.solve().unwrap();
-    let extent = moving.indentation.band_extent_mm.unwrap();
+    let window = moving.indentation.edge_window.unwrap();
     assert!(
         moving.indentation.band_moves >= 2,
         "the edge travels ~1.5 mm: the band moved {} times",
@@ -42,11 +41,7 @@ fn a_band_moved_along_the_curve_ends_where_a_fixed_band_does() {
     let end = end.points.last().unwrap();
 
     let mut fixed = Simulation::new(&params(0.5, 10));
-    fixed.discretisation.mesh.edge_window = Some(EdgeWindow::over(
-        extent,
-        BAND.fine_size_mm,
-        BAND.depth_size_mm,
-    ));
+    fixed.discretisation.mesh.edge_window = Some(window);
     fixed.nonlinear_solver.penetration_tolerance_mm = 5e-4 * BAND.fine_size_mm;
     let fixed = fixed.solve().unwrap().complete().unwrap();
     let reference = fixed.points.last().unwrap();
@@ -78,7 +73,7 @@ fn frictional_curves_keep_the_plain_mesh() {
     let banded = sim.solve().unwrap();
     let plain = Simulation::new(&p).solve().unwrap();
     assert_eq!(banded.indentation.band_moves, 0);
-    assert_eq!(banded.indentation.band_extent_mm, None);
+    assert_eq!(banded.indentation.edge_window, None);
     assert_eq!(
         banded.indentation.model.n_dofs(),
         plain.indentation.model.n_dofs()

@@ -1,0 +1,36 @@
+#!/usr/bin/env bash
+# Fits curves solved with the converged contact radius (tactile fem curve --edge-band) with
+# the shipped production table, next to curves solved on the production mesh itself: the
+# modulus error the production table's discretisation makes on a sample that has no mesh.
+#
+#   scripts/converged_truth_fit.sh [OUT_DIR]      # default target/converged-truth
+#
+# Each converged curve takes 1-2 min on one core (release build).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+out=${1:-target/converged-truth}
+mkdir -p "$out"
+cargo build -q --release -p tactile
+tactile=target/release/tactile
+lut=fem-core/data/default.lut
+for case in 37:6 153:6 412:15 600:15; do
+    e=${case%:*}
+    p=${case#*:}
+    printf 'true E2 %s kPa at %s kPa:\n' "$e" "$p"
+    for mesh in converged production; do
+        csv="$out/${mesh}_${e}_${p}.csv"
+        flag=()
+        [ "$mesh" = converged ] && flag=(--edge-band)
+        "$tactile" fem curve --modulus "$e" --pressure "$p" "${flag[@]}" --out "$csv" 2>/dev/null
+        fitted=$("$tactile" fit "$csv" --lut "$lut" --json)
+        python3 - "$mesh" "$e" "$fitted" <<'PY'
+import json, sys
+mesh, truth, fit = sys.argv[1], float(sys.argv[2]), json.loads(sys.argv[3])
+e = fit["modulus_kpa"]
+lo, hi = fit["ci95_kpa"]
+covered = "covers" if lo <= truth <= hi else "misses"
+print(f"    {mesh:10} curve: E2 = {e:7.1f} kPa ({100 * (e / truth - 1):+.2f} %), "
+      f"95 % interval {lo:.1f} .. {hi:.1f} kPa ({covered} the truth)")
+PY
+    done
+done
