@@ -274,6 +274,26 @@ pub struct SampleGrading {
     pub growth: f64,
 }
 
+impl SampleGrading {
+    /// The sample's element edges: radii from the axis outwards, depths below the top.
+    pub fn edges(&self, geometry: &SampleGeometry) -> (Vec<f64>, Vec<f64>) {
+        (
+            graded_edges(
+                geometry.radius_mm,
+                self.fine_size_mm,
+                self.fine_radius_mm,
+                self.growth,
+            ),
+            graded_edges(
+                geometry.thickness_mm,
+                self.fine_depth_size_mm,
+                self.fine_depth_mm,
+                self.growth,
+            ),
+        )
+    }
+}
+
 /// Node sets of the sample.
 #[derive(Debug, Clone)]
 pub struct SampleMesh {
@@ -318,11 +338,21 @@ pub fn graded_edges_capped(
     let fine_len = fine_len.min(length);
     let n_fine = ((fine_len / fine) - 1e-9).ceil().max(1.0) as usize;
     let size = fine_len / n_fine as f64;
-    let mut edges: Vec<f64> = (0..=n_fine).map(|k| k as f64 * size).collect();
+    let edges: Vec<f64> = (0..=n_fine).map(|k| k as f64 * size).collect();
     let mut h = size;
-    let mut x = fine_len;
-    while x < length - 1e-12 {
+    march(length, edges, |_| {
         h = (h * growth).min(max_size);
+        h
+    })
+}
+
+/// Continue the element edges `edges` to `length` with elements of size `next(x)` from the
+/// last edge x; the last element is stretched to the end, or merged with the one before,
+/// when less than half an element would be left.
+fn march(length: f64, mut edges: Vec<f64>, mut next: impl FnMut(f64) -> f64) -> Vec<f64> {
+    let mut x = edges.last().copied().unwrap_or(0.0);
+    while x < length - 1e-12 {
+        let h = next(x);
         if x + 1.5 * h >= length {
             edges.push(length);
             break;
@@ -338,9 +368,7 @@ pub fn graded_edges_capped(
 /// towards a refined window is reached before the window, not overshot); the last element
 /// is merged if it would be under half its size.
 pub fn edges_from_size_field(length: f64, size: impl Fn(f64) -> f64) -> Vec<f64> {
-    let mut edges = vec![0.0];
-    let mut x = 0.0;
-    while x < length - 1e-12 {
+    march(length, vec![0.0], |x| {
         let mut h = size(x);
         for _ in 0..30 {
             // the smallest size over the element (sampled), so a window inside it counts
@@ -352,14 +380,8 @@ pub fn edges_from_size_field(length: f64, size: impl Fn(f64) -> f64) -> Vec<f64>
             }
             h = h_new;
         }
-        if x + 1.5 * h >= length {
-            edges.push(length);
-            break;
-        }
-        x += h;
-        edges.push(x);
-    }
-    edges
+        h
+    })
 }
 
 /// A size field that is `fine` inside [lo, hi] and grows geometrically by `growth` per
@@ -424,18 +446,7 @@ pub fn add_sample(
     grading: &SampleGrading,
     body: usize,
 ) -> SampleMesh {
-    let r_edges = graded_edges(
-        geometry.radius_mm,
-        grading.fine_size_mm,
-        grading.fine_radius_mm,
-        grading.growth,
-    );
-    let depth_edges = graded_edges(
-        geometry.thickness_mm,
-        grading.fine_depth_size_mm,
-        grading.fine_depth_mm,
-        grading.growth,
-    );
+    let (r_edges, depth_edges) = grading.edges(geometry);
     add_sample_with_edges(mesh, geometry, &r_edges, &depth_edges, body)
 }
 

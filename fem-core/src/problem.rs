@@ -26,8 +26,7 @@ use crate::element::Formulation;
 use crate::material::Material;
 use crate::mesh::{
     ArcGrading, Mesh, SampleGeometry, SampleGrading, SampleMesh, ShellDivisions, ShellGeometry,
-    ShellMesh, add_sample, add_sample_with_edges, add_shell_with_arc_edges, graded_edges,
-    refined_edges,
+    ShellMesh, add_sample, add_sample_with_edges, add_shell_with_arc_edges, refined_edges,
 };
 use crate::model::{Model, NewtonFailure, NewtonSettings};
 
@@ -420,18 +419,7 @@ impl Indentation {
             match &spec.edge_window {
                 None => add_sample(&mut mesh, &geometry, &grading, 1),
                 Some(w) => {
-                    let r_base = graded_edges(
-                        geometry.radius_mm,
-                        grading.fine_size_mm,
-                        grading.fine_radius_mm,
-                        grading.growth,
-                    );
-                    let depth_base = graded_edges(
-                        geometry.thickness_mm,
-                        grading.fine_depth_size_mm,
-                        grading.fine_depth_mm,
-                        grading.growth,
-                    );
+                    let (r_base, depth_base) = grading.edges(&geometry);
                     let [lo, hi] = w.sample_radius_mm;
                     let r_edges = refined_edges(&r_base, lo, hi, w.fine_size_mm, w.growth);
                     let depth_edges =

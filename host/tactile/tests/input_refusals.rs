@@ -100,18 +100,10 @@ fn a_negative_radius_is_refused_with_its_line() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
-fn fem_curve(dir: &Path, thickness: &str) -> Output {
+fn fem_curve(dir: &Path, extra: &[&str]) -> Output {
     tactile()
-        .args([
-            "fem",
-            "curve",
-            "--modulus",
-            "100",
-            "--pressure",
-            "6",
-            "--thickness",
-        ])
-        .arg(thickness)
+        .args(["fem", "curve", "--modulus", "100", "--pressure", "6"])
+        .args(extra)
         .arg("--out")
         .arg(dir.join("curve.csv"))
         .output()
@@ -123,7 +115,7 @@ fn sample_thickness_out_of_the_verified_range_is_refused_by_name() {
     let dir = scratch("thickness");
     // A negative value is a value, not an unknown flag; 1e6 mm is beyond the verified range.
     for value in ["-3", "1e6"] {
-        let out = fem_curve(&dir, value);
+        let out = fem_curve(&dir, &["--thickness", value]);
         assert_eq!(out.status.code(), Some(2), "{value}: {}", stderr(&out));
         assert!(
             stderr(&out).contains("sample_thickness_mm"),
@@ -262,22 +254,7 @@ fn a_measurement_that_fails_after_connecting_leaves_no_empty_record_folder() {
 #[test]
 fn an_edge_band_with_friction_is_refused_before_solving() {
     let dir = scratch("edge-band-friction");
-    let out = tactile()
-        .args([
-            "fem",
-            "curve",
-            "--modulus",
-            "100",
-            "--pressure",
-            "6",
-            "--friction",
-            "0.3",
-            "--edge-band",
-            "--out",
-        ])
-        .arg(dir.join("curve.csv"))
-        .output()
-        .unwrap();
+    let out = fem_curve(&dir, &["--friction", "0.3", "--edge-band"]);
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
     assert!(stderr(&out).contains("--edge-band needs a frictionless curve"));
     assert!(!dir.join("curve.csv").exists());
