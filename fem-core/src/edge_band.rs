@@ -7,7 +7,8 @@
 //! 25 um elements around the edge ([`crate::problem::EdgeWindow`]) resolves it: halving
 //! the band's elements again moves a by under a micrometre. The edge travels ~4 mm over a
 //! curve, so the band moves with it: before a step whose predicted edge leaves the middle
-//! of the band, the mesh is rebuilt with the band ahead of the edge, the converged state is
+//! of the band, the mesh is rebuilt with the band centred on that edge (placed at the
+//! material points now at those radii), the converged state is
 //! interpolated onto it ([`transfer_block`]: exact for the old mesh's quadratic fields
 //! where the old elements are kept or subdivided) and the equilibrium at the same travel is
 //! solved again before the step. The edge itself stays inside fine elements of both meshes,
@@ -31,8 +32,8 @@ pub struct EdgeBand {
 impl EdgeBand {
     /// 25 um elements over +-0.3 mm, 50 um into the sample's depth (see the convergence
     /// study in docs/fem-verification.md: 12.5 um elements, along the surfaces and into
-    /// the depth, move a by under 1 um; the 25 um depth elements cost twice the time for
-    /// under 1 um more).
+    /// the depth, move a by under 1 um; 25 um depth elements cost 2.5 times the time for
+    /// about 1.5 um more).
     pub const CONVERGED: Self = Self {
         fine_size_mm: 0.025,
         half_width_mm: 0.3,

@@ -367,7 +367,7 @@ fn march(length: f64, mut edges: Vec<f64>, mut next: impl FnMut(f64) -> f64) -> 
 /// size `size(y)` at its far end y (solved by fixed-point iteration, so a size that shrinks
 /// towards a refined window is reached before the window, not overshot); the last element
 /// is merged if it would be under half its size.
-pub fn edges_from_size_field(length: f64, size: impl Fn(f64) -> f64) -> Vec<f64> {
+fn edges_from_size_field(length: f64, size: impl Fn(f64) -> f64) -> Vec<f64> {
     march(length, vec![0.0], |x| {
         let mut h = size(x);
         for _ in 0..30 {
@@ -387,7 +387,7 @@ pub fn edges_from_size_field(length: f64, size: impl Fn(f64) -> f64) -> Vec<f64>
 /// A size field that is `fine` inside [lo, hi] and grows geometrically by `growth` per
 /// element away from it (size = fine + (growth - 1) distance, the sizes of a geometric
 /// progression), never above `coarse(x)`.
-pub fn window_size(
+fn window_size(
     x: f64,
     lo: f64,
     hi: f64,

@@ -70,11 +70,11 @@ pub struct MeshSpec {
 }
 
 /// A band of fine elements around the contact edge, in reference coordinates, on both
-/// contact surfaces; the sample's top layer is refined into depth to the same size. Away
+/// contact surfaces; the sample's top layer is refined into depth to `depth_size_mm`. Away
 /// from the band the element sizes grow geometrically back to those of the [`MeshSpec`],
 /// and the elements beyond the growth's reach are those of the mesh without the band.
-/// The mesh of the converged reference in docs/fem-verification.md ("A band of fine
-/// elements at the edge").
+/// The mesh of the converged reference in docs/fem-verification.md ("The converged
+/// contact radius: a band of fine elements at the edge").
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct EdgeWindow {
     /// Polar angles (rad) of the shell's arc between which its elements are fine.
@@ -104,16 +104,16 @@ impl EdgeWindow {
             growth: 1.3,
         }
     }
-
-    /// Element size of the contact surfaces where the edge is (the contact penalty's and
-    /// smoothing's length scale).
-    pub fn contact_size_mm(spec: &MeshSpec) -> f64 {
-        spec.edge_window
-            .map_or(spec.sample_fine_size_mm, |w| w.fine_size_mm)
-    }
 }
 
 impl MeshSpec {
+    /// Element size of the contact surfaces where the edge is (the contact penalty's and
+    /// smoothing's length scale).
+    pub fn contact_size_mm(&self) -> f64 {
+        self.edge_window
+            .map_or(self.sample_fine_size_mm, |w| w.fine_size_mm)
+    }
+
     /// Level 0 is the production mesh (0.2 mm Q9 elements along the shell and in the
     /// sample's contact zone, 2 through the wall, with the production edge refinement
     /// [`EDGE_REFINEMENT`] along the contact surfaces); each +1 halves every element size.
@@ -456,7 +456,7 @@ impl Indentation {
         model.pressure_surface = shell.inner_surface.clone();
         if let Some(s) = &sample {
             let soft_kpa = params.shell_modulus_kpa.min(params.sample_modulus_kpa);
-            let contact_size_mm = EdgeWindow::contact_size_mm(&settings.mesh);
+            let contact_size_mm = settings.mesh.contact_size_mm();
             let penalty = settings.penalty_factor * soft_kpa / contact_size_mm;
             // slave: the sample's top; master: the shell's outer surface from the equator
             // to the apex (outward normal pointing out of the shell)

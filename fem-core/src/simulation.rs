@@ -271,8 +271,8 @@ impl Simulation {
     }
 
     /// The contact radius resolved by a band of fine elements that follows the contact
-    /// edge ([`EdgeBand::CONVERGED`]: a converged to about a micrometre, at several times
-    /// the production cost; frictionless curves only, others keep the plain mesh).
+    /// edge ([`EdgeBand::CONVERGED`]: a converged to about 2 um, at 30-80 times the
+    /// production cost; frictionless curves only, others keep the plain mesh).
     pub fn with_edge_band(mut self) -> Self {
         self.discretisation.edge_band = Some(EdgeBand::CONVERGED);
         self
