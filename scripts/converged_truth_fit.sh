@@ -5,7 +5,7 @@
 #
 #   scripts/converged_truth_fit.sh [OUT_DIR]      # default target/converged-truth
 #
-# Each converged curve takes 1-2 min on one core (release build).
+# Each converged curve takes 6-20 s on one core (release build).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:-target/converged-truth}

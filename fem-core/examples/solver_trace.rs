@@ -2,7 +2,10 @@
 //! its Newton solves (first solve, then one per contact augmentation), and the totals.
 //! `cargo run -p fem-core --release --example solver_trace -- [modulus_kpa] [pressure_kpa]
 //! [mesh_level] [friction]`; `FEM_CHORD=0` disables the chord iterations (full Newton
-//! only), `FEM_CHORD=N,Q` allows N of them per solve with contraction Q.
+//! only), `FEM_CHORD=N,Q` allows N of them per solve with contraction Q; `FEM_EDGE_BAND=1`
+//! solves with the band of fine elements at the contact edge, `FEM_CURVATURE_BELOW=X` sets
+//! the relative residual below which the contact tangent includes the master surface's
+//! curvature.
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<f64> = std::env::args()
@@ -18,6 +21,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         ..Default::default()
     };
     let mut sim = fem_core::Simulation::new(&params);
+    if std::env::var_os("FEM_EDGE_BAND").is_some() {
+        sim = sim.with_edge_band();
+    }
+    if let Some(below) = std::env::var("FEM_CURVATURE_BELOW")
+        .ok()
+        .and_then(|v| v.parse().ok())
+    {
+        sim.linear_solver.contact_curvature_below = below;
+    }
     if let Ok(c) = std::env::var("FEM_CHORD") {
         let mut parts = c.split(',');
         if let Some(k) = parts.next().and_then(|v| v.parse().ok()) {

@@ -21,7 +21,8 @@
 //! penalty `eps` (kPa/mm) and multiplier `lambda` (mN, updated by Uzawa augmentation between
 //! solves) is `f_n = < lambda - eps A g >` with the potential
 //! `Pi = < lambda - eps A g >^2 / (2 eps A)`, so `dPi/dx = -f_n dg/dx` and
-//! `d2Pi/dx2 = eps A dg dg^T - f_n d2g/dx2`. The bracket is C1-smoothed over a tiny gap
+//! `d2Pi/dx2 = eps A dg dg^T - f_n d2g/dx2` (the second term optional:
+//! [`ContactPair::gap_curvature_tangent`]). The bracket is C1-smoothed over a tiny gap
 //! width ([`smooth_ramp`]) so that nodes entering or leaving contact do not make Newton cycle.
 //! The contact pressure reported is `f_n` over the current tributary area.
 
@@ -341,6 +342,14 @@ pub struct ContactPair {
     /// of its symmetric part (which keeps the Cholesky solver but makes Newton converge
     /// linearly, and often not at all, while slip is active).
     pub unsymmetric_friction: bool,
+    /// Include the gap's second variation (the master surface's curvature, `-f_n d2g/dx2`)
+    /// in the tangent: Newton's exact Jacobian. Without it the tangent is the penalty's
+    /// main part `eps A dg dg^T` alone; the residual, hence the equilibrium, is the same.
+    /// On a finely divided master surface (the edge band's 12.5 um node spacing) the C1
+    /// spline's curvature jumps from node to node as a slave's projection slides, and the
+    /// exact term makes the tangent indefinite and Newton wander; the main part converges
+    /// there in a third to a seventh of the step attempts.
+    pub gap_curvature_tangent: bool,
     /// Surface coordinate (segment index + parameter) of each slave's closest point at the
     /// last converged step, `None` if it was not in contact.
     previous_coordinate: Vec<Option<f64>>,
@@ -515,6 +524,7 @@ impl ContactPair {
             friction: 0.0,
             slip_regularisation_mm: 1e-4,
             unsymmetric_friction: true,
+            gap_curvature_tangent: true,
             previous_coordinate: vec![None; n],
         }
     }
@@ -692,7 +702,9 @@ impl ContactPair {
             let mut tangent = Vec::new();
             if with_tangent {
                 let hess = self
-                    .gap_hessian(seg, xs, &coords)
+                    .gap_curvature_tangent
+                    .then(|| self.gap_hessian(seg, xs, &coords))
+                    .flatten()
                     .unwrap_or_else(|| vec![0.0; n * n]);
                 tangent = vec![0.0; n * n];
                 for a in 0..n {

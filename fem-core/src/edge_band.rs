@@ -19,7 +19,7 @@
 use crate::mesh::Block;
 
 /// How the band around the contact edge is meshed and moved.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct EdgeBand {
     /// Element size inside the band (mm).
     pub fine_size_mm: f64,

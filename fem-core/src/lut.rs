@@ -17,7 +17,10 @@ pub mod interp;
 pub mod pchip;
 pub mod table;
 
-pub use build::{CurveReport, build_lut, fem_solver_description, solve_curve_for_table};
+pub use build::{
+    CurveReport, TableSolve, build_fem_lut, build_lut, fem_solver_description,
+    solve_curve_for_table,
+};
 pub use error::{LutError, TableDefect};
 pub use format::{
     LUT_FORMAT_VERSION, LUT_MAGIC, LutFile, read_lut, read_lut_bytes, write_lut, write_lut_bytes,

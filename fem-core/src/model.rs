@@ -42,6 +42,10 @@ pub struct NewtonSettings {
     pub max_chord_iterations: usize,
     pub chord_contraction: f64,
     pub chord_below: f64,
+    /// The contact tangent includes the master surface's curvature
+    /// (`ContactPair::gap_curvature_tangent`) only at iterations whose previous relative
+    /// residual was below this; infinite: always (exact Newton), 0: never.
+    pub contact_curvature_below: f64,
 }
 
 impl Default for NewtonSettings {
@@ -55,6 +59,7 @@ impl Default for NewtonSettings {
             max_chord_iterations: 8,
             chord_contraction: 0.1,
             chord_below: 1e-2,
+            contact_curvature_below: f64::INFINITY,
         }
     }
 }
@@ -616,6 +621,12 @@ impl Model {
         while it < self.newton.max_iterations {
             let chord =
                 try_chord && chords < chord_limit && self.solver.has_factor(self.n_equations);
+            if self.newton.contact_curvature_below.is_finite() {
+                let close = last.0 / last.1 < self.newton.contact_curvature_below;
+                for c in &mut self.contacts {
+                    c.gap_curvature_tangent = close;
+                }
+            }
             let t0 = std::time::Instant::now();
             let assembled = self.assemble(u, p_kpa, !chord);
             self.assembly_seconds += t0.elapsed().as_secs_f64();

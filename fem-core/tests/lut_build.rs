@@ -256,3 +256,38 @@ fn tables_of_fem_cores_solver_record_the_estimated_error_of_a() {
     assert!(e(-2).rms_um > e(-1).rms_um && e(-1).rms_um > e(0).rms_um && e(0).rms_um > e(1).rms_um);
     assert_eq!(fem_core::discretisation::contact_radius_error(3), None);
 }
+
+#[test]
+fn tables_record_the_edge_band_and_plain_tables_keep_their_bytes() {
+    // a plain table's header says nothing of a band (old tables read and write unchanged)
+    let plain = full_build();
+    assert_eq!(plain.edge_band, None);
+    let (bytes, _) = write_lut_bytes(&plain).unwrap();
+    assert!(!String::from_utf8_lossy(&bytes).contains("edge_band"));
+    // a band table's header records the band, and it survives the round trip
+    let mut banded = full_build();
+    banded.edge_band = Some(fem_core::edge_band::EdgeBand::CONVERGED);
+    banded.contact_radius_error = Some(fem_core::discretisation::EDGE_BAND);
+    let (bytes, _) = write_lut_bytes(&banded).unwrap();
+    let back = read_lut_bytes(&bytes, "t.lut").unwrap();
+    assert_eq!(back.header.mesh.edge_band, banded.edge_band);
+    assert_eq!(back.lut, banded);
+    // the band's recorded error is an order of magnitude below the production mesh's
+    let band_error = fem_core::discretisation::EDGE_BAND;
+    let production = fem_core::discretisation::contact_radius_error(0).unwrap();
+    assert!(band_error.max_um < production.max_um / 10.0);
+}
+
+#[test]
+fn the_edge_band_refuses_a_grid_with_friction() {
+    // before any curve is solved: the band carries no slip history
+    let err = fem_core::lut::build_fem_lut(
+        &grid(),
+        None,
+        fem_core::lut::TableSolve::EdgeBand,
+        &|_, _| {},
+        &quiet,
+    )
+    .unwrap_err();
+    assert!(err.to_string().contains("frictionless"), "{err}");
+}

@@ -41,6 +41,68 @@ pub fn solve_curve_for_table(
     Ok(solution.curve)
 }
 
+/// How fem-core's own solver discretises the curves of a table.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum TableSolve {
+    /// The grid's mesh level throughout ([`crate::Simulation::new`]).
+    Plain,
+    /// The grid's mesh level with the band of fine elements that follows the contact edge
+    /// ([`crate::Simulation::with_edge_band`]): the converged contact radius. Frictional
+    /// curves keep the plain mesh (a table with friction on its axes is refused).
+    EdgeBand,
+}
+
+/// [`build_lut`] with fem-core's own solver ([`solve_curve_for_table`] or its
+/// [`TableSolve::EdgeBand`] form), its description ([`fem_solver_description`]) and, for
+/// the band, the band and its error estimate recorded in the table.
+pub fn build_fem_lut(
+    grid: &LutGrid,
+    shard: Option<Shard>,
+    solve: TableSolve,
+    on_stop: &(dyn Fn(&CurveParams, &crate::FemError) + Sync),
+    on_curve: &(dyn Fn(&CurveReport) + Sync),
+) -> Result<Lut, LutError> {
+    let level = grid.base.mesh_level;
+    match solve {
+        TableSolve::Plain => {
+            let solver = |p: &CurveParams| solve_curve_for_table(p, on_stop);
+            build_lut(
+                grid,
+                shard,
+                &solver,
+                &fem_solver_description(level),
+                on_curve,
+            )
+        }
+        TableSolve::EdgeBand => {
+            if grid.base.friction != 0.0 || grid.effects.friction.iter().any(|&f| f != 0.0) {
+                return Err(LutError::InvalidGrid(
+                    "the edge band solves frictionless curves only; the grid has friction".into(),
+                ));
+            }
+            let simulation = |p: &CurveParams| crate::Simulation::new(p).with_edge_band();
+            let solver = |p: &CurveParams| {
+                let solution = simulation(p).solve()?;
+                if let crate::StopReason::Stopped { error, .. } = &solution.stop {
+                    on_stop(p, error);
+                }
+                Ok::<_, crate::FemError>(solution.curve)
+            };
+            let base = simulation(&grid.curve_params(0));
+            let description = format!(
+                "{FEM_CORE_SOLVER} with {:?}, {:?}; {}",
+                base.solver_settings(),
+                base.linear_solver,
+                crate::problem::OUTPUT_DEFINITIONS
+            );
+            let mut lut = build_lut(grid, shard, &solver, &description, on_curve)?;
+            lut.edge_band = base.discretisation.edge_band;
+            lut.contact_radius_error = Some(crate::discretisation::EDGE_BAND);
+            Ok(lut)
+        }
+    }
+}
+
 /// Progress report for one finished curve (for printing; never stored in the table).
 #[derive(Debug, Clone)]
 pub struct CurveReport {
@@ -140,6 +202,7 @@ where
             .starts_with(FEM_CORE_SOLVER)
             .then(|| crate::discretisation::contact_radius_error(grid.base.mesh_level))
             .flatten(),
+        edge_band: None,
         curves,
     })
 }

@@ -48,6 +48,10 @@ pub struct MeshDescription {
     /// (`fem_core::discretisation`); absent in tables of other solvers or levels.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub contact_radius_error: Option<crate::discretisation::ContactRadiusError>,
+    /// The band of fine elements that followed the contact edge (`fem_core::edge_band`);
+    /// absent for the plain mesh.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub edge_band: Option<crate::edge_band::EdgeBand>,
 }
 
 /// One curve's entry in the header.
@@ -107,6 +111,7 @@ impl LutHeader {
                         .to_string(),
                 solver: lut.solver.clone(),
                 contact_radius_error: lut.contact_radius_error,
+                edge_band: lut.edge_band,
             },
             shard: lut.shard,
             // the stiffening axis (outermost) is named only when it is varied, so tables
@@ -355,6 +360,7 @@ pub fn read_lut_bytes(bytes: &[u8], source_name: &str) -> Result<LutFile, LutErr
         solver: header.mesh.solver.clone(),
         shard: header.shard,
         contact_radius_error: header.mesh.contact_radius_error,
+        edge_band: header.mesh.edge_band,
         curves,
     };
     lut.validate()

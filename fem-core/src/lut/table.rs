@@ -137,6 +137,9 @@ pub struct Lut {
     /// The estimated discretisation error of the curves' contact radius (fem-core's own
     /// solver at a studied mesh level; `None` otherwise).
     pub contact_radius_error: Option<crate::discretisation::ContactRadiusError>,
+    /// The band of fine elements that followed the contact edge in every curve's solve
+    /// (the converged contact radius, `fem_core::edge_band`); `None`: the plain mesh.
+    pub edge_band: Option<crate::edge_band::EdgeBand>,
     /// Curves sorted by grid index: every index of the grid (or of the shard) exactly once.
     pub curves: Vec<LutCurve>,
 }
@@ -349,6 +352,7 @@ pub fn merge_shards(shards: &[(String, Lut)]) -> Result<Lut, LutError> {
         solver: first.solver.clone(),
         shard: None,
         contact_radius_error: first.contact_radius_error,
+        edge_band: first.edge_band,
         curves,
     };
     merged

@@ -299,6 +299,7 @@ pub fn sub_table(lut: &Lut, sel: &EffectSelection) -> Result<Lut, TableError> {
         solver: lut.solver.clone(),
         shard: None,
         contact_radius_error: lut.contact_radius_error,
+        edge_band: lut.edge_band,
         curves,
     };
     out.validate().map_err(|defect| TableError::Invalid {

@@ -1,8 +1,10 @@
 //! The model's own discretisation error, carried into the modulus.
 //!
 //! The production table (mesh level L) and the same grid solved one level finer (level L+1,
-//! `fem-core/data/default-fine.lut`) differ in the contact radius by the leading part of
-//! level L's discretisation error (the difference of successive refinements). Projected on
+//! `fem-core/data/default-fine.lut`), or with the converged contact radius (the band of fine
+//! elements at the contact edge, `tactile lut build --edge-band`), differ in the contact
+//! radius by the leading part of level L's discretisation error (all of it, to about 2 um,
+//! with the band). Projected on
 //! the fit's sensitivity to ln E2 at the estimate E, that difference is the bias it causes
 //! in the modulus, ln E(production model) - ln E(finer model), to first order:
 //!
@@ -23,15 +25,19 @@ use crate::{FitError, FitOptions, FitPoint, LutModel, ModulusFit, fit_modulus};
 const LN_STEP: f64 = 0.01;
 
 /// Whether `fine` is `coarse`'s grid solved on a finer mesh: the same axes and base
-/// parameters, a higher mesh level.
+/// parameters, and a higher mesh level, or the band of fine elements at the contact edge
+/// (the converged contact radius) on a mesh level at least `coarse`'s where `coarse` has
+/// none.
 pub fn is_finer_version_of(fine: &Lut, coarse: &Lut) -> bool {
     let (f, c) = (&fine.grid, &coarse.grid);
     let mut f_base = f.base.clone();
     f_base.mesh_level = c.base.mesh_level;
-    f.base.mesh_level > c.base.mesh_level
-        && f.modulus_kpa == c.modulus_kpa
-        && f.pressure_kpa == c.pressure_kpa
-        && f_base == c.base
+    let finer = match (fine.edge_band.is_some(), coarse.edge_band.is_some()) {
+        (true, false) => f.base.mesh_level >= c.base.mesh_level,
+        (false, true) => false,
+        _ => f.base.mesh_level > c.base.mesh_level,
+    };
+    finer && f.modulus_kpa == c.modulus_kpa && f.pressure_kpa == c.pressure_kpa && f_base == c.base
 }
 
 /// The estimated bias of the production model's estimate, ln E(production) - ln E(finer),

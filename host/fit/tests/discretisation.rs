@@ -27,7 +27,7 @@ fn points(model: &LutModel, e: f64, p: f64) -> Vec<FitPoint> {
 }
 
 #[test]
-fn the_shipped_fine_table_is_the_production_grid_one_level_finer() {
+fn the_shipped_fine_table_is_the_production_grid_converged() {
     let coarse = read_lut(&fem_core::shipped::default_lut_path())
         .unwrap()
         .lut;
@@ -35,6 +35,16 @@ fn the_shipped_fine_table_is_the_production_grid_one_level_finer() {
     assert!(is_finer_version_of(&fine, &coarse));
     assert!(!is_finer_version_of(&coarse, &fine));
     assert!(!is_finer_version_of(&coarse, &coarse));
+    // the converged contact radius (the edge band) on the same mesh level is finer than
+    // the plain mesh, not the other way round
+    let mut banded = coarse.clone();
+    banded.edge_band = Some(fem_core::edge_band::EdgeBand::CONVERGED);
+    assert!(is_finer_version_of(&banded, &coarse));
+    assert!(!is_finer_version_of(&coarse, &banded));
+    assert!(!is_finer_version_of(&banded, &banded));
+    // nor is a band table of another grid
+    banded.grid.modulus_kpa.pop();
+    assert!(!is_finer_version_of(&banded, &coarse));
 }
 
 #[test]

@@ -63,7 +63,7 @@ pub struct CurveArgs {
     #[arg(long, allow_negative_numbers = true)]
     pub mesh_level: Option<i32>,
     /// Resolve the contact edge with a band of 25 um elements that follows it: a converged
-    /// to about 2 um (the production mesh's a is off by up to ~25 um), at 30-80 times the
+    /// to about 2 um (the production mesh's a is off by up to ~25 um), at 3-7 times the
     /// time. Frictionless curves only.
     #[arg(long)]
     pub edge_band: bool,
