@@ -3,9 +3,8 @@
 //! `cargo run -p fem-core --release --example solver_trace -- [modulus_kpa] [pressure_kpa]
 //! [mesh_level] [friction]`; `FEM_CHORD=0` disables the chord iterations (full Newton
 //! only), `FEM_CHORD=N,Q` allows N of them per solve with contraction Q; `FEM_EDGE_BAND=1`
-//! solves with the band of fine elements at the contact edge, `FEM_CURVATURE_BELOW=X` sets
-//! the relative residual below which the contact tangent includes the master surface's
-//! curvature.
+//! solves with the band of fine elements at the contact edge, `FEM_CONTACT_CURVATURE=0|1`
+//! leaves out or includes the master surface's curvature in the contact tangent.
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<f64> = std::env::args()
@@ -24,11 +23,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if std::env::var_os("FEM_EDGE_BAND").is_some() {
         sim = sim.with_edge_band();
     }
-    if let Some(below) = std::env::var("FEM_CURVATURE_BELOW")
-        .ok()
-        .and_then(|v| v.parse().ok())
-    {
-        sim.linear_solver.contact_curvature_below = below;
+    if let Ok(v) = std::env::var("FEM_CONTACT_CURVATURE") {
+        sim.linear_solver.contact_curvature_tangent = v != "0";
     }
     if let Ok(c) = std::env::var("FEM_CHORD") {
         let mut parts = c.split(',');

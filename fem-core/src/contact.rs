@@ -347,8 +347,7 @@ pub struct ContactPair {
     /// main part `eps A dg dg^T` alone; the residual, hence the equilibrium, is the same.
     /// On a finely divided master surface (the edge band's 12.5 um node spacing) the C1
     /// spline's curvature jumps from node to node as a slave's projection slides, and the
-    /// exact term makes the tangent indefinite and Newton wander; the main part converges
-    /// there in a third to a seventh of the step attempts.
+    /// exact term makes the tangent indefinite and Newton wander (docs/fem-verification.md).
     pub gap_curvature_tangent: bool,
     /// Surface coordinate (segment index + parameter) of each slave's closest point at the
     /// last converged step, `None` if it was not in contact.

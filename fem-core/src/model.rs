@@ -42,10 +42,9 @@ pub struct NewtonSettings {
     pub max_chord_iterations: usize,
     pub chord_contraction: f64,
     pub chord_below: f64,
-    /// The contact tangent includes the master surface's curvature
-    /// (`ContactPair::gap_curvature_tangent`) only at iterations whose previous relative
-    /// residual was below this; infinite: always (exact Newton), 0: never.
-    pub contact_curvature_below: f64,
+    /// The contact tangent includes the master surface's curvature (exact Newton; copied
+    /// to every `ContactPair::gap_curvature_tangent` when a solve starts).
+    pub contact_curvature_tangent: bool,
 }
 
 impl Default for NewtonSettings {
@@ -59,7 +58,7 @@ impl Default for NewtonSettings {
             max_chord_iterations: 8,
             chord_contraction: 0.1,
             chord_below: 1e-2,
-            contact_curvature_below: f64::INFINITY,
+            contact_curvature_tangent: true,
         }
     }
 }
@@ -473,6 +472,7 @@ impl Model {
     ) -> Result<usize, NewtonFailure> {
         self.stats.newton_solves += 1;
         self.stats.last_history.clear();
+        self.sync_contact_tangent();
         let set_lambda = |model: &mut Self, lambda: f64| {
             for &(d, coef) in load_dofs {
                 model.prescribed[d] = coef * lambda;
@@ -586,6 +586,14 @@ impl Model {
         })
     }
 
+    /// The contact pairs assemble the tangent [`NewtonSettings::contact_curvature_tangent`]
+    /// asks for.
+    fn sync_contact_tangent(&mut self) {
+        for c in &mut self.contacts {
+            c.gap_curvature_tangent = self.newton.contact_curvature_tangent;
+        }
+    }
+
     fn solve_logged(
         &mut self,
         u: &mut [f64],
@@ -607,6 +615,7 @@ impl Model {
         p_kpa: f64,
         continuing: bool,
     ) -> Result<usize, NewtonFailure> {
+        self.sync_contact_tangent();
         self.apply_prescribed(u);
         let mut last = (f64::NAN, f64::NAN);
         // (residual norm before the step, the step, whether it was a chord step)
@@ -621,12 +630,6 @@ impl Model {
         while it < self.newton.max_iterations {
             let chord =
                 try_chord && chords < chord_limit && self.solver.has_factor(self.n_equations);
-            if self.newton.contact_curvature_below.is_finite() {
-                let close = last.0 / last.1 < self.newton.contact_curvature_below;
-                for c in &mut self.contacts {
-                    c.gap_curvature_tangent = close;
-                }
-            }
             let t0 = std::time::Instant::now();
             let assembled = self.assemble(u, p_kpa, !chord);
             self.assembly_seconds += t0.elapsed().as_secs_f64();

@@ -92,7 +92,7 @@ fn the_tangent_without_curvature_reaches_the_same_equilibria() {
     };
     let exact = Simulation::new(&p).solve().unwrap().complete().unwrap();
     let mut sim = Simulation::new(&p);
-    sim.linear_solver.contact_curvature_below = 0.0;
+    sim.linear_solver.contact_curvature_tangent = false;
     let main_part = sim.solve().unwrap().complete().unwrap();
     // both stop augmenting the contact once the penetration is under the tolerance, from
     // different multipliers: measured at most 44 nm in a, 6e-7 mm in u_s, 6e-5 in the load
