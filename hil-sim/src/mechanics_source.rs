@@ -72,10 +72,24 @@ pub fn build_mechanics(
 /// The fem-core solves a `solve` mechanics source asks for (empty for other sources), in
 /// modulus-major order. They can be saved as JSON and used as a `curves` source.
 pub fn solve_curves(scenario: &Scenario) -> Result<Vec<Curve>, MechanicsSourceError> {
+    let edge_band = matches!(
+        scenario.mechanics,
+        MechanicsSource::Solve {
+            edge_band: true,
+            ..
+        }
+    );
     solve_params(scenario)
         .into_iter()
         .map(|params| {
-            fem_core::solve_curve(&params).map_err(|source| MechanicsSourceError::Solve {
+            let simulation = fem_core::Simulation::new(&params);
+            let simulation = if edge_band {
+                simulation.with_edge_band()
+            } else {
+                simulation
+            };
+            let solved = simulation.solve().and_then(|s| s.complete());
+            solved.map_err(|source| MechanicsSourceError::Solve {
                 modulus_kpa: params.sample_modulus_kpa,
                 pressure_kpa: params.pressure_kpa,
                 source,
@@ -93,6 +107,7 @@ pub fn solve_params(scenario: &Scenario) -> Vec<CurveParams> {
         mesh_level,
         steps,
         max_depth_mm,
+        ..
     } = &scenario.mechanics
     else {
         return Vec::new();

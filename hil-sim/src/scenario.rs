@@ -75,6 +75,11 @@ pub enum MechanicsSource {
         steps: usize,
         #[serde(default = "default_max_depth")]
         max_depth_mm: f64,
+        /// Solve with the band of fine elements that follows the contact edge (the
+        /// converged contact radius, `fem_core::Simulation::with_edge_band`); frictionless
+        /// samples only.
+        #[serde(default)]
+        edge_band: bool,
     },
     /// A rigid flat sample (calibration).
     Rigid {},
@@ -409,9 +414,19 @@ impl Scenario {
             pressures_kpa,
             modulus_factors,
             steps,
+            edge_band,
             ..
         } = &self.mechanics
         {
+            if *edge_band && self.sample.friction != 0.0 {
+                return bad(
+                    "mechanics.edge_band",
+                    format!(
+                        "the edge band solves frictionless samples only; sample.friction is {}",
+                        self.sample.friction
+                    ),
+                );
+            }
             if pressures_kpa.is_empty()
                 || pressures_kpa.iter().any(|p| !(p.is_finite() && *p >= 0.0))
             {

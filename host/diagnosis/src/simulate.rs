@@ -146,6 +146,7 @@ pub fn truth_scenario(spec: &SimSpec) -> Scenario {
         mesh_level: EFFECT_MESH_LEVEL,
         steps: TRUTH_STEPS,
         max_depth_mm: TRUTH_MAX_DEPTH_MM,
+        edge_band: false,
     };
     s
 }

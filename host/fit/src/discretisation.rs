@@ -1,12 +1,12 @@
 //! The model's own discretisation error, carried into the modulus.
 //!
-//! The production table (mesh level L) and the same grid solved one level finer (level L+1,
-//! `fem-core/data/default-fine.lut`), or with the converged contact radius (the band of fine
-//! elements at the contact edge, `tactile lut build --edge-band`), differ in the contact
-//! radius by the leading part of level L's discretisation error (all of it, to about 2 um,
-//! with the band). Projected on
-//! the fit's sensitivity to ln E2 at the estimate E, that difference is the bias it causes
-//! in the modulus, ln E(production model) - ln E(finer model), to first order:
+//! The production table (mesh level L) and the same grid solved one level finer (level L+1),
+//! or with the converged contact radius (the band of fine elements at the contact edge,
+//! `tactile lut build --edge-band`, the shipped `fem-core/data/default-fine.lut`), differ
+//! in the contact radius by the leading part of level L's discretisation error (all of it,
+//! to about 2 um, with the band). Projected on the fit's sensitivity to ln E2 at the
+//! estimate E, that difference is the bias it causes in the modulus,
+//! ln E(production model) - ln E(finer model), to first order:
 //!
 //! `d = sum_i s_i (a_fine(E, p_i, u_i) - a(E, p_i, u_i)) / sum_i s_i^2`,
 //! `s_i = da/d ln E2 at (E, p_i, u_i)` (central difference, step 0.01 in ln E2).
@@ -14,8 +14,12 @@
 //! (A sample whose true radii are the finer model's is fitted at E with the production
 //! model, so a(E) ~ a_fine(E_true) and a_fine(E) - a(E) ~ s (ln E - ln E_true).)
 //!
-//! The fit keeps its estimate (the finer level is not converged either,
-//! docs/fem-verification.md) and widens its interval by `|d|` in quadrature.
+//! - Finer reference converged (the band): the estimate is corrected, E -> E exp(-d), and
+//!   the interval moves with it; what remains is the reference's own error, at most
+//!   `max_um` of its header's `contact_radius_error` at any point, which projects to at
+//!   most `r = max_um sum_i |s_i| / sum_i s_i^2` in ln E2, added in quadrature.
+//! - Finer reference not converged (a plain finer mesh level): the fit keeps its estimate
+//!   and widens its interval by `|d|` in quadrature.
 
 use fem_core::lut::Lut;
 
@@ -68,8 +72,37 @@ pub fn discretisation_bias_ln(
     (n >= 3 && den > 0.0).then(|| num / den)
 }
 
-/// Widens `fit`'s interval by the discretisation term in quadrature and records it.
-pub fn widen_for_discretisation(
+/// Largest shift in ln E2 that an error of at most `error_mm` in a at every point can cause
+/// in a fit at `modulus_kpa` (`error_mm sum |s_i| / sum s_i^2`); `None` if fewer than 3
+/// points are covered.
+pub fn projected_error_ln(
+    model: &LutModel,
+    modulus_kpa: f64,
+    points: &[FitPoint],
+    error_mm: f64,
+) -> Option<f64> {
+    let (lo, hi) = (modulus_kpa * (-LN_STEP).exp(), modulus_kpa * LN_STEP.exp());
+    let (mut sum_abs, mut den, mut n) = (0.0, 0.0, 0usize);
+    for p in points {
+        let (Ok(a_lo), Ok(a_hi)) = (
+            model.sample(lo, p.p_air_kpa, p.u_s_mm),
+            model.sample(hi, p.p_air_kpa, p.u_s_mm),
+        ) else {
+            continue;
+        };
+        let s = (a_hi.a_mm - a_lo.a_mm) / (2.0 * LN_STEP);
+        sum_abs += s.abs();
+        den += s * s;
+        n += 1;
+    }
+    (n >= 3 && den > 0.0).then(|| error_mm * sum_abs / den)
+}
+
+/// Carries the model's discretisation error into `fit` (see the module documentation):
+/// with a converged reference (`fine` has the edge band and an error estimate) the estimate
+/// is corrected and the reference's own error widens the interval; otherwise the interval
+/// is widened by the bias. Records the terms in `fit`.
+pub fn apply_discretisation_term(
     fit: &mut ModulusFit,
     model: &LutModel,
     fine: &LutModel,
@@ -78,15 +111,36 @@ pub fn widen_for_discretisation(
     let Some(bias) = discretisation_bias_ln(model, fine, fit.modulus_kpa, points) else {
         return;
     };
-    let (lo, hi) = (fit.ci95_kpa[0].ln(), fit.ci95_kpa[1].ln());
-    let centre = 0.5 * (lo + hi);
-    let half = (0.25 * (hi - lo).powi(2) + bias * bias).sqrt();
-    fit.ci95_kpa = [(centre - half).exp(), (centre + half).exp()];
+    let (mut lo, mut hi) = (fit.ci95_kpa[0].ln(), fit.ci95_kpa[1].ln());
     fit.discretisation_bias_ln = Some(bias);
-    fit.ci_description.push_str(&format!(
-        "; plus in quadrature the model's discretisation term |ln E - ln E(finer mesh)| = {:.4}",
-        bias.abs()
-    ));
+    let converged = fine.lut().edge_band.is_some();
+    let reference_error = fine.lut().contact_radius_error.filter(|_| converged);
+    let widen_by = match reference_error {
+        Some(error) => {
+            fit.modulus_production_kpa = Some(fit.modulus_kpa);
+            fit.modulus_kpa *= (-bias).exp();
+            lo -= bias;
+            hi -= bias;
+            let residual = projected_error_ln(fine, fit.modulus_kpa, points, error.max_um * 1e-3)
+                .unwrap_or(bias.abs());
+            fit.discretisation_residual_ln = Some(residual);
+            fit.ci_description.push_str(&format!(
+                "; corrected to the converged contact radius by {:+.4} in ln E2 (the model's discretisation bias), plus in quadrature the converged model's own error ({:.1} um in a at most) = {residual:.4}",
+                -bias, error.max_um
+            ));
+            residual
+        }
+        None => {
+            fit.ci_description.push_str(&format!(
+                "; plus in quadrature the model's discretisation term |ln E - ln E(finer mesh)| = {:.4}",
+                bias.abs()
+            ));
+            bias.abs()
+        }
+    };
+    let centre = 0.5 * (lo + hi);
+    let half = (0.25 * (hi - lo).powi(2) + widen_by * widen_by).sqrt();
+    fit.ci95_kpa = [(centre - half).exp(), (centre + half).exp()];
 }
 
 /// The shipped finer table (`fem_core::shipped::fine_lut_path`) if it is `lut`'s grid on a
@@ -96,8 +150,8 @@ pub fn shipped_finer_table(lut: &Lut) -> Option<Lut> {
     is_finer_version_of(&fine.lut, lut).then_some(fine.lut)
 }
 
-/// [`fit_modulus`], then the interval widened by the model's discretisation term when the
-/// shipped finer table matches the model's table. The term compares the two tables
+/// [`fit_modulus`], then the model's discretisation term ([`apply_discretisation_term`])
+/// when the shipped finer table matches the model's table. The term compares the two tables
 /// themselves (a model's augmentation is the same on both meshes, so it is left out).
 pub fn fit_modulus_with_model_error(
     model: &LutModel,
@@ -109,7 +163,7 @@ pub fn fit_modulus_with_model_error(
         && let Ok(fine_model) = LutModel::new(&fine)
         && let Ok(table) = LutModel::new(model.lut())
     {
-        widen_for_discretisation(&mut fit, &table, &fine_model, points);
+        apply_discretisation_term(&mut fit, &table, &fine_model, points);
     }
     Ok(fit)
 }

@@ -143,10 +143,15 @@ pub struct ModulusFit {
     pub modulus_linear_interpolation_kpa: f64,
     /// Half-width (in ln E2) added in quadrature for the table's interpolation error.
     pub interpolation_half_width_ln: f64,
-    /// The model's discretisation term (the estimated bias ln E - ln E(finer mesh)), added in
-    /// quadrature to the interval when a finer table was available
-    /// ([`crate::discretisation`]).
+    /// The model's discretisation term (the estimated bias ln E - ln E(finer mesh)) when a
+    /// finer table was available ([`crate::discretisation`]): subtracted from the estimate
+    /// when the finer table is converged, else added in quadrature to the interval.
     pub discretisation_bias_ln: Option<f64>,
+    /// The estimate before that correction (the table's own), when it was corrected.
+    pub modulus_production_kpa: Option<f64>,
+    /// The converged reference's own error projected on ln E2, added in quadrature to the
+    /// interval when the estimate was corrected.
+    pub discretisation_residual_ln: Option<f64>,
     pub load_channel_used: bool,
     pub rms_residual_load_n: Option<f64>,
 }
@@ -853,6 +858,8 @@ pub fn fit_modulus(
         modulus_linear_interpolation_kpa: x_linear.exp(),
         interpolation_half_width_ln: half_interp,
         discretisation_bias_ln: None,
+        modulus_production_kpa: None,
+        discretisation_residual_ln: None,
         load_channel_used: load_used,
         rms_residual_load_n: core.rms_load,
     })

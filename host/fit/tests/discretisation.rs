@@ -1,12 +1,13 @@
-//! The discretisation term of the fit's interval: the shipped production table and its
-//! finer-mesh twin, and the term predicting the bias that fitting the production model to
-//! finer-mesh data actually shows.
+//! The discretisation term of the fit: the shipped production table and its converged
+//! twin, the term predicting the bias that fitting the production model to converged data
+//! actually shows, and the correction it makes.
 
 #![allow(clippy::unwrap_used)] // tests may unwrap: a panic fails the test with its message
 
 use fem_core::lut::read_lut;
 use fit::discretisation::{
-    discretisation_bias_ln, fit_modulus_with_model_error, is_finer_version_of,
+    apply_discretisation_term, discretisation_bias_ln, fit_modulus_with_model_error,
+    is_finer_version_of,
 };
 use fit::{FitOptions, FitPoint, LutModel, fit_modulus};
 
@@ -74,13 +75,75 @@ fn the_term_predicts_the_bias_of_fitting_finer_mesh_data() {
             (predicted - actual).abs() <= 0.3 * actual.abs() + 0.002,
             "E2 {e}: predicted {predicted:+.4}, actual {actual:+.4}"
         );
-        // With the term, the interval covers the finer-mesh truth.
-        let widened = fit_modulus_with_model_error(&model, &data, FitOptions::default()).unwrap();
-        assert!(widened.discretisation_bias_ln.is_some());
+        // With the term the estimate is corrected to the converged model (the shipped finer
+        // table has the edge band): what remains is the linearisation's share of the bias
+        // (the tolerance above), and the interval covers the converged truth.
+        let corrected = fit_modulus_with_model_error(&model, &data, FitOptions::default()).unwrap();
+        assert!(corrected.discretisation_bias_ln.is_some());
+        assert_eq!(corrected.modulus_production_kpa, Some(fit.modulus_kpa));
+        let remaining = (corrected.modulus_kpa / e).ln();
         assert!(
-            widened.ci95_kpa[0] <= e && e <= widened.ci95_kpa[1],
-            "E2 {e}: {:?}",
-            widened.ci95_kpa
+            remaining.abs() <= 0.3 * actual.abs() + 0.002,
+            "E2 {e}: corrected {:.2} kPa ({remaining:+.4})",
+            corrected.modulus_kpa
         );
+        assert!(
+            corrected.ci95_kpa[0] <= e && e <= corrected.ci95_kpa[1],
+            "E2 {e}: {:?}",
+            corrected.ci95_kpa
+        );
+    }
+}
+
+/// The correction itself, on a known bias: a "converged" twin whose curves are the
+/// production table's with every modulus label 2 % higher, so that its a at E2 is the
+/// production table's at E2 / 1.02 and data made of it fit 2 % low with the production
+/// table. The correction must restore E2, and a plain finer twin (no band) must only widen
+/// the interval.
+#[test]
+fn a_converged_twin_corrects_the_estimate_and_a_plain_one_widens_the_interval() {
+    let coarse = read_lut(&fem_core::shipped::default_lut_path())
+        .unwrap()
+        .lut;
+    let mut twin = coarse.clone();
+    twin.grid.modulus_kpa.iter_mut().for_each(|e| *e *= 1.02);
+    twin.edge_band = Some(fem_core::edge_band::EdgeBand::CONVERGED);
+    twin.contact_radius_error = Some(fem_core::discretisation::EDGE_BAND);
+    let (model, twin_model) = (
+        LutModel::new(&coarse).unwrap(),
+        LutModel::new(&twin).unwrap(),
+    );
+    for (e, p) in [(150.0, 6.0), (500.0, 15.0)] {
+        let data = points(&twin_model, e, p);
+        let production = fit_modulus(&model, &data, FitOptions::default()).unwrap();
+        assert!((production.modulus_kpa / (e / 1.02) - 1.0).abs() < 1e-3);
+        let mut corrected = production.clone();
+        apply_discretisation_term(&mut corrected, &model, &twin_model, &data);
+        let bias = corrected.discretisation_bias_ln.unwrap();
+        eprintln!(
+            "E2 {e}: production {:.2}, corrected {:.2} kPa, bias {bias:+.4}, residual term {:.4}",
+            production.modulus_kpa,
+            corrected.modulus_kpa,
+            corrected.discretisation_residual_ln.unwrap()
+        );
+        // a pure relabelling is linear in ln E2 to the table's interpolation: the
+        // first-order correction restores E2 to 0.1 % (the bias itself is 2 %)
+        assert!((corrected.modulus_kpa / e - 1.0).abs() < 1e-3);
+        assert!(corrected.ci95_kpa[0] <= e && e <= corrected.ci95_kpa[1]);
+        // the interval moved with the estimate and widened by the twin's own error
+        let width = |f: &fit::ModulusFit| (f.ci95_kpa[1] / f.ci95_kpa[0]).ln();
+        assert!(width(&corrected) > width(&production));
+
+        // the same twin without the band is not converged: estimate kept, interval widened
+        // by the bias
+        let mut plain_twin = twin.clone();
+        plain_twin.edge_band = None;
+        let plain_model = LutModel::new(&plain_twin).unwrap();
+        let mut widened = production.clone();
+        apply_discretisation_term(&mut widened, &model, &plain_model, &data);
+        assert_eq!(widened.modulus_kpa, production.modulus_kpa);
+        assert_eq!(widened.modulus_production_kpa, None);
+        // half-width at least |bias| (in quadrature with the fit's own)
+        assert!(width(&widened) >= 2.0 * bias.abs());
     }
 }

@@ -26,6 +26,7 @@ fn rigid_bench_scenario() -> Scenario {
         mesh_level: -2,
         steps: 40,
         max_depth_mm: 1.9,
+        edge_band: false,
     };
     s
 }
