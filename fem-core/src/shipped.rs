@@ -21,9 +21,9 @@ pub fn default_lut_path() -> PathBuf {
     data_dir().join("default.lut")
 }
 
-/// The table the simulated bench's samples are made of, `default-fine.lut`: the production
-/// grid solved on a finer mesh (level 1) than the fit's table (level 0), so that the
-/// simulated truth does not share the fit's discretisation error.
+/// The converged table, `default-fine.lut`: the production grid solved with the band of
+/// fine elements at the contact edge (the converged contact radius). The simulated bench's
+/// samples are made of it, and the fit corrects the production table's estimate to it.
 pub fn fine_lut_path() -> PathBuf {
     data_dir().join("default-fine.lut")
 }

@@ -196,10 +196,10 @@ const SOFT_KPA: f64 = 46.42;
 /// 600-700 kPa; every modulus above ~100 kPa prefers 15 kPa). Not 1000 kPa: the production
 /// table reads stiff samples slightly high and 1000 kPa is its upper limit.
 const STIFF_KPA: f64 = 600.0;
-/// The relative error allowed. The simulated sample is the fine-mesh table (mesh level 1)
-/// and the fit uses the production table (level 0): `docs/results.md` has the demo read
-/// +1.4 % at 600 kPa and ±0.2 % below 120 kPa from that discretisation difference, with
-/// 95 % intervals of ±0.8 to ±1.8 % from five indentations. Two indentations widen the
+/// The relative error allowed. The simulated sample is the converged table (the production
+/// grid with the edge band) and the fit uses the production table (level 0), corrected to
+/// the converged table: `docs/results.md` has the demo within a few tenths of a percent,
+/// with 95 % intervals of ±0.8 to ±2 % from five indentations. Two indentations widen the
 /// interval by sqrt(5/2) (to about ±2.9 % at 600 kPa), and the 600 kPa sample is between
 /// the tables' 464 and 681 kPa nodes, so the bench interpolates its truth: 5 % covers the
 /// bias plus the interval with a margin and still fails a measurement at the wrong

@@ -18,9 +18,9 @@ pub fn shipped_lut() -> PathBuf {
     fem_core::shipped::default_lut_path()
 }
 
-/// The table the simulated bench's sample is made of: the production grid on a finer mesh
-/// (`fem-core/data/default-fine.lut`, level 1), so that a simulated run does not fit its own
-/// model; the fit uses the production table ([`shipped_lut`]).
+/// The table the simulated bench's sample is made of: the production grid with the converged
+/// contact radius (`fem-core/data/default-fine.lut`, the edge band), so that a simulated run
+/// does not fit its own mesh; the fit uses the production table ([`shipped_lut`]).
 pub fn sim_lut() -> PathBuf {
     fem_core::shipped::fine_lut_path()
 }

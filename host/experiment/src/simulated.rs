@@ -490,7 +490,7 @@ pub fn run_demo_with(scenario: Scenario, options: &DemoOptions) -> Result<DemoRe
     let lut_path = options.lut.clone().unwrap_or_else(demo_fit_lut_path);
     if options.lut.is_none() && options.scenario.is_none() {
         notes.push(format!(
-            "fit table: {} (the production table, mesh level 0); the simulated sample is solved at its exact modulus on mesh level {DEMO_MESH_LEVEL} with the converged contact radius (the edge band), so the error includes the model's discretisation error",
+            "fit table: {} (the production table, mesh level 0); the simulated sample is solved at its exact modulus on mesh level {DEMO_MESH_LEVEL} with the converged contact radius (the edge band); the fit corrects its estimate to that contact radius with the shipped converged table (default-fine.lut)",
             lut_path.display()
         ));
     }

@@ -39,8 +39,8 @@ pub struct DaemonArgs {
     #[arg(long)]
     token_file: Option<PathBuf>,
     /// Lookup table for the fit (default: the shipped production table,
-    /// fem-core/data/default.lut, with --sim too: the simulated sample is made of the finer
-    /// fem-core/data/default-fine.lut).
+    /// fem-core/data/default.lut, with --sim too: the simulated sample is made of the
+    /// converged fem-core/data/default-fine.lut).
     #[arg(long)]
     lut: Option<PathBuf>,
     /// The setup's model file (`tactile diagnose --apply`): every experiment's fit uses the
