@@ -44,6 +44,15 @@ pub fn is_finer_version_of(fine: &Lut, coarse: &Lut) -> bool {
     finer && f.modulus_kpa == c.modulus_kpa && f.pressure_kpa == c.pressure_kpa && f_base == c.base
 }
 
+/// `s = da/d ln E2` at `(modulus_kpa, p)` (central difference), `None` where the table does
+/// not cover the point.
+fn sensitivity(model: &LutModel, modulus_kpa: f64, p: &FitPoint) -> Option<f64> {
+    let (lo, hi) = (modulus_kpa * (-LN_STEP).exp(), modulus_kpa * LN_STEP.exp());
+    let a_lo = model.sample(lo, p.p_air_kpa, p.u_s_mm).ok()?;
+    let a_hi = model.sample(hi, p.p_air_kpa, p.u_s_mm).ok()?;
+    Some((a_hi.a_mm - a_lo.a_mm) / (2.0 * LN_STEP))
+}
+
 /// The estimated bias of the production model's estimate, ln E(production) - ln E(finer),
 /// at the points (see the module documentation); `None` if fewer than 3 points are covered
 /// by both tables.
@@ -53,18 +62,15 @@ pub fn discretisation_bias_ln(
     modulus_kpa: f64,
     points: &[FitPoint],
 ) -> Option<f64> {
-    let (lo, hi) = (modulus_kpa * (-LN_STEP).exp(), modulus_kpa * LN_STEP.exp());
     let (mut num, mut den, mut n) = (0.0, 0.0, 0usize);
     for p in points {
-        let (Ok(a), Ok(a_fine), Ok(a_lo), Ok(a_hi)) = (
+        let (Some(s), Ok(a), Ok(a_fine)) = (
+            sensitivity(model, modulus_kpa, p),
             model.sample(modulus_kpa, p.p_air_kpa, p.u_s_mm),
             fine.sample(modulus_kpa, p.p_air_kpa, p.u_s_mm),
-            model.sample(lo, p.p_air_kpa, p.u_s_mm),
-            model.sample(hi, p.p_air_kpa, p.u_s_mm),
         ) else {
             continue;
         };
-        let s = (a_hi.a_mm - a_lo.a_mm) / (2.0 * LN_STEP);
         num += s * (a_fine.a_mm - a.a_mm);
         den += s * s;
         n += 1;
@@ -81,16 +87,11 @@ pub fn projected_error_ln(
     points: &[FitPoint],
     error_mm: f64,
 ) -> Option<f64> {
-    let (lo, hi) = (modulus_kpa * (-LN_STEP).exp(), modulus_kpa * LN_STEP.exp());
     let (mut sum_abs, mut den, mut n) = (0.0, 0.0, 0usize);
-    for p in points {
-        let (Ok(a_lo), Ok(a_hi)) = (
-            model.sample(lo, p.p_air_kpa, p.u_s_mm),
-            model.sample(hi, p.p_air_kpa, p.u_s_mm),
-        ) else {
-            continue;
-        };
-        let s = (a_hi.a_mm - a_lo.a_mm) / (2.0 * LN_STEP);
+    for s in points
+        .iter()
+        .filter_map(|p| sensitivity(model, modulus_kpa, p))
+    {
         sum_abs += s.abs();
         den += s * s;
         n += 1;
