@@ -522,6 +522,30 @@ mod tests {
     }
 
     #[test]
+    fn the_edge_band_solve_is_refused_with_friction_and_kept_without() {
+        let text = |friction: f64| {
+            format!(
+                "[sample]\nfriction = {friction}\n[mechanics]\nsource = \"solve\"\npressures_kpa = [6.0]\nedge_band = true\n"
+            )
+        };
+        let e = Scenario::parse(&text(0.3), Path::new("band.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("band.toml") && e.contains("mechanics.edge_band"),
+            "{e}"
+        );
+        let s = Scenario::parse(&text(0.0), Path::new("band.toml")).unwrap();
+        assert!(matches!(
+            s.mechanics,
+            MechanicsSource::Solve {
+                edge_band: true,
+                ..
+            }
+        ));
+    }
+
+    #[test]
     fn errors_name_the_file_and_the_field() {
         let e = Scenario::parse("[sample]\nmodulus_kpa = -3.0\n", Path::new("bad.toml"))
             .unwrap_err()
