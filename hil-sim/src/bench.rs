@@ -555,6 +555,18 @@ const TICKS_PER_BATCH: usize = 2;
 /// simulated time to now (a few ticks: host bytes wait at most that long in the port).
 const LAG_REANCHOR_S: f64 = 0.002;
 
+/// Hands bytes from the host to the device at its present time (recorded for a probe).
+fn deliver(device: &mut dyn BenchDevice, probe: &BenchProbe, probing: bool, bytes: &[u8]) {
+    let now = device.time_s();
+    if probing && let Ok(mut s) = probe.state.lock() {
+        s.writes.push(HostWrite {
+            t_s: now,
+            bytes: bytes.to_vec(),
+        });
+    }
+    device.host_write(bytes, now);
+}
+
 /// Serves one powered-up device until the bench stops or the cable is pulled; true if the
 /// terminal was hung up instead (only with `wiring.hangup_ends`).
 fn serve(
@@ -596,9 +608,16 @@ fn serve(
         }
         probed |= probe_on;
         probing = probe_on;
-        // Host -> device.
+        // Host -> device. In real time the bytes are handed to the device after the
+        // simulation below has caught up with the wall clock, as a real device takes them
+        // when they arrive: handed over at once, they would carry the time at which the
+        // simulation last stopped, up to a whole catch-up (rendered frames, a descheduled
+        // process) earlier, and the host's clock map would take that for the device's
+        // clock (the round trip does not grow, so its filter cannot see it).
+        let mut arrived = 0;
         match port.read(&mut buf) {
             Ok(n) if n > 0 => {
+                arrived = n;
                 if !real_time && options.pacing == Pacing::Auto {
                     // A host attached: from now on simulated time follows the wall clock.
                     real_time = true;
@@ -610,14 +629,10 @@ fn serve(
                     }
                     device.set_camera_enabled(options.camera);
                 }
-                let now = device.time_s();
-                if probing && let Ok(mut s) = probe.state.lock() {
-                    s.writes.push(HostWrite {
-                        t_s: now,
-                        bytes: buf[..n].to_vec(),
-                    });
+                if !real_time {
+                    deliver(device, probe, probing, &buf[..n]);
+                    arrived = 0;
                 }
-                device.host_write(&buf[..n], now);
             }
             Ok(_) if hangup_ends => return true,
             Ok(_) => {}
@@ -642,10 +657,13 @@ fn serve(
                 device.step();
                 ticks += 1;
             }
-            if ticks == 0 {
+            if ticks == 0 && arrived == 0 {
                 let ahead = device.next_tick_s() - wall;
                 std::thread::sleep(Duration::from_secs_f64(ahead.clamp(0.0, 0.001)));
-            } else if device.may_lag_wall_clock() && wall - device.time_s() > LAG_REANCHOR_S {
+            } else if ticks > 0
+                && device.may_lag_wall_clock()
+                && wall - device.time_s() > LAG_REANCHOR_S
+            {
                 // Behind the wall clock: carry on from here at real-time speed instead of
                 // running faster to catch up.
                 anchor = Instant::now();
@@ -664,6 +682,9 @@ fn serve(
             {
                 std::thread::sleep(Duration::from_millis(1));
             }
+        }
+        if arrived > 0 {
+            deliver(device, probe, probing, &buf[..arrived]);
         }
         // Device -> host.
         pending_out.extend(device.take_tx_until(device.time_s()));
