@@ -14,6 +14,7 @@ pub mod error;
 pub mod format;
 pub mod grid;
 pub mod interp;
+pub mod interpolation_error;
 pub mod pchip;
 pub mod table;
 

@@ -276,6 +276,8 @@ fn info(a: InfoArgs) -> ExitCode {
             "size_bytes": file.size_bytes,
             "sha256": file.sha256,
             "header": file.header,
+            "modulus_interpolation_leave_one_out":
+                fem_core::lut::interpolation_error::modulus_leave_one_out(&file.lut),
         });
         println!("{v}");
         return ExitCode::SUCCESS;
@@ -347,6 +349,13 @@ fn describe(path: &Path, file: &LutFile) -> String {
         ),
         None => "error of a:    not estimated for this table".to_string(),
     });
+    for e in fem_core::lut::interpolation_error::modulus_leave_one_out(lut) {
+        line(format!(
+            "E2 interpolation at {} kPa: up to {:.1} um of a, {:.1} um RMS (a node left out \
+             and read from its neighbours, at twice the grid spacing; worst at {} kPa)",
+            e.pressure_kpa, e.max_um, e.rms_um, e.worst_modulus_kpa
+        ));
+    }
     let ok: Vec<_> = lut.curves.iter().filter(|c| c.failure.is_none()).collect();
     if let (Some(min), Some(max)) = (
         ok.iter().map(|c| c.len()).min(),
