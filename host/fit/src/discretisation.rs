@@ -17,7 +17,8 @@
 //! - Finer reference converged (the band): the estimate is corrected, E -> E exp(-d), and
 //!   the interval moves with it; what remains is the reference's own error, at most
 //!   `max_um` of its header's `contact_radius_error` at any point, which projects to at
-//!   most `r = max_um sum_i |s_i| / sum_i s_i^2` in ln E2, added in quadrature.
+//!   most `r = max_um sum_i |s_i| / sum_i s_i^2` in ln E2, added in quadrature. The
+//!   per-pressure and per-replicate estimates are corrected the same way.
 //! - Finer reference not converged (a plain finer mesh level): the fit keeps its estimate
 //!   and widens its interval by `|d|` in quadrature.
 
@@ -125,6 +126,7 @@ pub fn apply_discretisation_term(
             let residual = projected_error_ln(fine, fit.modulus_kpa, points, error.max_um * 1e-3)
                 .unwrap_or(bias.abs());
             fit.discretisation_residual_ln = Some(residual);
+            correct_partial_estimates(fit, model, fine, points, error.max_um * 1e-3);
             fit.ci_description.push_str(&format!(
                 "; corrected to the converged contact radius by {:+.4} in ln E2 (the model's discretisation bias), plus in quadrature the converged model's own error ({:.1} um in a at most) = {residual:.4}",
                 -bias, error.max_um
@@ -142,6 +144,41 @@ pub fn apply_discretisation_term(
     let centre = 0.5 * (lo + hi);
     let half = (0.25 * (hi - lo).powi(2) + widen_by * widen_by).sqrt();
     fit.ci95_kpa = [(centre - half).exp(), (centre + half).exp()];
+}
+
+/// The same correction for the fit's partial estimates, so that they stay comparable with
+/// the corrected joint one: each pressure's estimate by the bias over that pressure's
+/// points (its interval moved and widened by its own residual term), each replicate's by
+/// the bias over all points at its modulus (replicates follow one plan, so their points
+/// cover the same pressures and u_s).
+fn correct_partial_estimates(
+    fit: &mut ModulusFit,
+    model: &LutModel,
+    fine: &LutModel,
+    points: &[FitPoint],
+    error_mm: f64,
+) {
+    for pf in fit.per_pressure.iter_mut() {
+        let at_p: Vec<FitPoint> = points
+            .iter()
+            .filter(|q| q.p_air_kpa == pf.p_air_kpa)
+            .copied()
+            .collect();
+        let Some(bias) = discretisation_bias_ln(model, fine, pf.modulus_kpa, &at_p) else {
+            continue;
+        };
+        pf.modulus_kpa *= (-bias).exp();
+        let residual = projected_error_ln(fine, pf.modulus_kpa, &at_p, error_mm).unwrap_or(0.0);
+        let (lo, hi) = (pf.ci95_kpa[0].ln() - bias, pf.ci95_kpa[1].ln() - bias);
+        let centre = 0.5 * (lo + hi);
+        let half = (0.25 * (hi - lo).powi(2) + residual * residual).sqrt();
+        pf.ci95_kpa = [(centre - half).exp(), (centre + half).exp()];
+    }
+    for e in fit.replicate_moduli_kpa.iter_mut() {
+        if let Some(bias) = discretisation_bias_ln(model, fine, *e, points) {
+            *e *= (-bias).exp();
+        }
+    }
 }
 
 /// The shipped finer table (`fem_core::shipped::fine_lut_path`) if it is `lut`'s grid on a

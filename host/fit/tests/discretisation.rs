@@ -147,3 +147,44 @@ fn a_converged_twin_corrects_the_estimate_and_a_plain_one_widens_the_interval() 
         assert!(width(&widened) >= 2.0 * bias.abs());
     }
 }
+
+/// The partial estimates follow the joint one: with the relabelled twin above (a known 2 %
+/// bias), data at 6 and 15 kPa with 3 replicates each; after the correction every
+/// per-pressure and per-replicate estimate is back at E2 to 0.1 %, as the joint one is.
+#[test]
+fn per_pressure_and_replicate_estimates_are_corrected_too() {
+    let coarse = read_lut(&fem_core::shipped::default_lut_path())
+        .unwrap()
+        .lut;
+    let mut twin = coarse.clone();
+    twin.grid.modulus_kpa.iter_mut().for_each(|e| *e *= 1.02);
+    twin.edge_band = Some(fem_core::edge_band::EdgeBand::CONVERGED);
+    twin.contact_radius_error = Some(fem_core::discretisation::EDGE_BAND);
+    let (model, twin_model) = (
+        LutModel::new(&coarse).unwrap(),
+        LutModel::new(&twin).unwrap(),
+    );
+    let e = 300.0;
+    let mut data = points(&twin_model, e, 6.0);
+    data.extend(points(&twin_model, e, 15.0));
+    let production = fit_modulus(&model, &data, FitOptions::default()).unwrap();
+    assert_eq!(production.per_pressure.len(), 2);
+    assert_eq!(production.replicate_moduli_kpa.len(), 3);
+    // uncorrected, every partial estimate carries the 2 % bias
+    for pf in &production.per_pressure {
+        assert!((pf.modulus_kpa / (e / 1.02) - 1.0).abs() < 1e-3, "{pf:?}");
+    }
+    let mut corrected = production.clone();
+    apply_discretisation_term(&mut corrected, &model, &twin_model, &data);
+    assert!((corrected.modulus_kpa / e - 1.0).abs() < 1e-3);
+    for (pf, before) in corrected.per_pressure.iter().zip(&production.per_pressure) {
+        assert!((pf.modulus_kpa / e - 1.0).abs() < 1e-3, "{pf:?}");
+        assert!(pf.ci95_kpa[0] <= e && e <= pf.ci95_kpa[1], "{pf:?}");
+        // moved with the estimate, and no narrower
+        let width = |c: [f64; 2]| (c[1] / c[0]).ln();
+        assert!(width(pf.ci95_kpa) >= width(before.ci95_kpa) - 1e-12);
+    }
+    for r in &corrected.replicate_moduli_kpa {
+        assert!((r / e - 1.0).abs() < 1e-3, "{r}");
+    }
+}
