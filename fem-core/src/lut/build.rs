@@ -90,9 +90,9 @@ pub fn build_fem_lut(
             };
             let base = simulation(&grid.curve_params(0));
             let description = format!(
-                "{FEM_CORE_SOLVER} with {:?}, {:?}; {}",
+                "{FEM_CORE_SOLVER} with {:?}, {}; {}",
                 base.solver_settings(),
-                base.linear_solver,
+                linear_solvers_of(grid, simulation),
                 crate::problem::OUTPUT_DEFINITIONS
             );
             let mut lut = build_lut(grid, shard, &solver, &description, on_curve)?;
@@ -100,6 +100,43 @@ pub fn build_fem_lut(
             lut.contact_radius_error = Some(crate::discretisation::EDGE_BAND);
             Ok(lut)
         }
+    }
+}
+
+/// The linear solver settings of the grid's curves: one `{:?}` if every curve has the
+/// same, else each distinct one with the internal pressures that use it (the edge band
+/// leaves the contact tangent's curvature term out for a pressurised shell). Computed over
+/// the whole grid, so every shard of it records the same description.
+fn linear_solvers_of(
+    grid: &LutGrid,
+    simulation: impl Fn(&CurveParams) -> crate::Simulation,
+) -> String {
+    let mut distinct: Vec<(String, Vec<f64>)> = Vec::new();
+    for (k, &p) in grid.pressure_kpa.iter().enumerate() {
+        let index = grid.flat_index(super::grid::GridIndex {
+            stiffening: 0,
+            material: 0,
+            friction: 0,
+            thickness: 0,
+            pressure: k,
+            modulus: 0,
+        });
+        let settings = format!("{:?}", simulation(&grid.curve_params(index)).linear_solver);
+        match distinct.iter_mut().find(|(d, _)| *d == settings) {
+            Some((_, pressures)) => pressures.push(p),
+            None => distinct.push((settings, vec![p])),
+        }
+    }
+    match distinct.as_slice() {
+        [(only, _)] => only.clone(),
+        _ => distinct
+            .iter()
+            .map(|(d, pressures)| {
+                let list: Vec<String> = pressures.iter().map(|p| p.to_string()).collect();
+                format!("{d} at p_air = {} kPa", list.join(", "))
+            })
+            .collect::<Vec<_>>()
+            .join("; "),
     }
 }
 
@@ -205,4 +242,37 @@ where
         edge_band: None,
         curves,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The band's tables solve p_air = 0 with the contact tangent's curvature term and a
+    /// pressurised shell without it: the description says which is which, and a grid of
+    /// pressurised curves only gets one setting.
+    #[test]
+    fn the_description_names_each_pressures_linear_solver() {
+        let band = |p: &CurveParams| crate::Simulation::new(p).with_edge_band();
+        let mixed = LutGrid::with_axes(
+            "mixed",
+            LutGrid::tiny_grid().base,
+            vec![100.0],
+            vec![0.0, 6.0, 15.0],
+        );
+        let d = linear_solvers_of(&mixed, band);
+        assert!(d.contains("contact_curvature_tangent: true"), "{d}");
+        assert!(d.contains("contact_curvature_tangent: false"), "{d}");
+        assert!(d.contains("at p_air = 0 kPa"), "{d}");
+        assert!(d.contains("at p_air = 6, 15 kPa"), "{d}");
+        let pressurised = LutGrid::with_axes(
+            "pressurised",
+            LutGrid::tiny_grid().base,
+            vec![100.0],
+            vec![6.0, 15.0],
+        );
+        let d = linear_solvers_of(&pressurised, band);
+        assert!(!d.contains("p_air ="), "{d}");
+        assert!(d.contains("contact_curvature_tangent: false"), "{d}");
+    }
 }
