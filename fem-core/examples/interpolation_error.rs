@@ -21,10 +21,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let file = read_lut(std::path::Path::new(&path))?;
     let lut = &file.lut;
     let pressures: Vec<f64> = match args.next() {
-        Some(list) => list
-            .split(',')
-            .map(str::parse)
-            .collect::<Result<_, _>>()?,
+        Some(list) => list.split(',').map(str::parse).collect::<Result<_, _>>()?,
         None => lut
             .grid
             .pressure_kpa

@@ -4,9 +4,10 @@
 //! interior modulus node k is left out and predicted from its neighbours k-2, k-1, k+1 and
 //! k+2 (those the table holds); the difference from the stored curve, at u_s every
 //! [`U_S_STEP_MM`] that all of them reach, is the error of the same interpolant at twice the
-//! grid spacing. For an interpolant of order q the error at the table's own spacing is about
-//! 2^-q of that (PCHIP: q = 3 on smooth data, 2 near an extremum of the slope), so the
-//! leave-one-out figure is an upper bound of what interpolation adds.
+//! grid spacing. On smooth curves that is larger than the error at the table's own spacing
+//! (PCHIP is of order 2-3). A feature narrower than the spacing can escape both, so this is
+//! a screening figure, not a bound. The example `interpolation_error` measures the error at
+//! the table's own spacing against direct solves.
 
 use super::grid::GridIndex;
 use super::pchip;
