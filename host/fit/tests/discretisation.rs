@@ -95,13 +95,10 @@ fn the_term_predicts_the_bias_of_fitting_finer_mesh_data() {
     }
 }
 
-/// The correction itself, on a known bias: a "converged" twin whose curves are the
-/// production table's with every modulus label 2 % higher, so that its a at E2 is the
-/// production table's at E2 / 1.02 and data made of it fit 2 % low with the production
-/// table. The correction must restore E2, and a plain finer twin (no band) must only widen
-/// the interval.
-#[test]
-fn a_converged_twin_corrects_the_estimate_and_a_plain_one_widens_the_interval() {
+/// The shipped production table and its "converged" twin with every modulus label 2 %
+/// higher (the band and its error estimate set): data made of the twin fit 2 % low with the
+/// production table.
+fn production_and_relabelled_twin() -> (fem_core::lut::Lut, fem_core::lut::Lut) {
     let coarse = read_lut(&fem_core::shipped::default_lut_path())
         .unwrap()
         .lut;
@@ -109,6 +106,17 @@ fn a_converged_twin_corrects_the_estimate_and_a_plain_one_widens_the_interval() 
     twin.grid.modulus_kpa.iter_mut().for_each(|e| *e *= 1.02);
     twin.edge_band = Some(fem_core::edge_band::EdgeBand::CONVERGED);
     twin.contact_radius_error = Some(fem_core::discretisation::EDGE_BAND);
+    (coarse, twin)
+}
+
+/// The correction itself, on a known bias: a "converged" twin whose curves are the
+/// production table's with every modulus label 2 % higher, so that its a at E2 is the
+/// production table's at E2 / 1.02 and data made of it fit 2 % low with the production
+/// table. The correction must restore E2, and a plain finer twin (no band) must only widen
+/// the interval.
+#[test]
+fn a_converged_twin_corrects_the_estimate_and_a_plain_one_widens_the_interval() {
+    let (coarse, twin) = production_and_relabelled_twin();
     let (model, twin_model) = (
         LutModel::new(&coarse).unwrap(),
         LutModel::new(&twin).unwrap(),
@@ -153,13 +161,7 @@ fn a_converged_twin_corrects_the_estimate_and_a_plain_one_widens_the_interval() 
 /// per-pressure and per-replicate estimate is back at E2 to 0.1 %, as the joint one is.
 #[test]
 fn per_pressure_and_replicate_estimates_are_corrected_too() {
-    let coarse = read_lut(&fem_core::shipped::default_lut_path())
-        .unwrap()
-        .lut;
-    let mut twin = coarse.clone();
-    twin.grid.modulus_kpa.iter_mut().for_each(|e| *e *= 1.02);
-    twin.edge_band = Some(fem_core::edge_band::EdgeBand::CONVERGED);
-    twin.contact_radius_error = Some(fem_core::discretisation::EDGE_BAND);
+    let (coarse, twin) = production_and_relabelled_twin();
     let (model, twin_model) = (
         LutModel::new(&coarse).unwrap(),
         LutModel::new(&twin).unwrap(),
