@@ -141,9 +141,14 @@ pub fn apply_discretisation_term(
             bias.abs()
         }
     };
+    fit.ci95_kpa = widened([lo, hi], widen_by);
+}
+
+/// The interval `[lo, hi]` (in ln E2) with `term` added to its half-width in quadrature, in kPa.
+fn widened([lo, hi]: [f64; 2], term: f64) -> [f64; 2] {
     let centre = 0.5 * (lo + hi);
-    let half = (0.25 * (hi - lo).powi(2) + widen_by * widen_by).sqrt();
-    fit.ci95_kpa = [(centre - half).exp(), (centre + half).exp()];
+    let half = (0.25 * (hi - lo).powi(2) + term * term).sqrt();
+    [(centre - half).exp(), (centre + half).exp()]
 }
 
 /// The same correction for the fit's partial estimates, so that they stay comparable with
@@ -169,10 +174,8 @@ fn correct_partial_estimates(
         };
         pf.modulus_kpa *= (-bias).exp();
         let residual = projected_error_ln(fine, pf.modulus_kpa, &at_p, error_mm).unwrap_or(0.0);
-        let (lo, hi) = (pf.ci95_kpa[0].ln() - bias, pf.ci95_kpa[1].ln() - bias);
-        let centre = 0.5 * (lo + hi);
-        let half = (0.25 * (hi - lo).powi(2) + residual * residual).sqrt();
-        pf.ci95_kpa = [(centre - half).exp(), (centre + half).exp()];
+        let shifted = [pf.ci95_kpa[0].ln() - bias, pf.ci95_kpa[1].ln() - bias];
+        pf.ci95_kpa = widened(shifted, residual);
     }
     for e in fit.replicate_moduli_kpa.iter_mut() {
         if let Some(bias) = discretisation_bias_ln(model, fine, *e, points) {
