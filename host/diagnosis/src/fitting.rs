@@ -5,6 +5,9 @@
 //! whitened units, inflated by max(1, chi^2/dof) when the fit is poor (the usual
 //! scale-factor correction), and the 95 % interval of E2 is exp(ln E2 +- 1.96 se).
 //!
+//! [`fit_joint`] minimises the joint chi^2 of the radius and the load instead
+//! ([`super::joint`]), the same algorithm on the stacked whitened residuals.
+//!
 //! When the model already includes effects ([`Model::included`], added by the forward
 //! selection), their parameters are fitted jointly with the modulus and the candidate's
 //! parameter, each kept in its range, from the model's stored values.
@@ -13,6 +16,7 @@ use serde::Serialize;
 
 use super::candidates::{Candidate, predict_with};
 use super::data::Point;
+use super::joint::JointWhitener;
 use super::linalg;
 use super::model::{Channel, Model};
 use super::noise_model::Whitener;
@@ -43,7 +47,15 @@ pub struct GlsFit {
     pub iterations: usize,
 }
 
-/// Fits `cand` (or the baseline) to `points[subset]` starting at (e0, theta0).
+/// What a fit minimises: the radius channel's chi^2, or both channels' joint chi^2.
+#[derive(Clone, Copy)]
+enum Objective<'w> {
+    Radius(&'w Whitener),
+    Joint(&'w JointWhitener),
+}
+
+/// Fits `cand` (or the baseline) to the contact radius of `points[subset]` starting at
+/// (e0, theta0).
 #[allow(clippy::too_many_arguments)]
 pub fn fit(
     model: &Model<'_>,
@@ -51,6 +63,56 @@ pub fn fit(
     points: &[Point],
     subset: &[usize],
     whitener: &Whitener,
+    e0: f64,
+    theta0: f64,
+    max_iterations: usize,
+) -> Option<GlsFit> {
+    fit_objective(
+        model,
+        cand,
+        points,
+        subset,
+        Objective::Radius(whitener),
+        e0,
+        theta0,
+        max_iterations,
+    )
+}
+
+/// Fits `cand` (or the baseline) to the contact radius and the load of `points[subset]`
+/// together ([`super::joint`]); every point needs a load. The result's chi^2, points and
+/// whitened values are over both channels; `residuals_mm` and `rms_residual_mm` are the
+/// radius's.
+#[allow(clippy::too_many_arguments)]
+pub fn fit_joint(
+    model: &Model<'_>,
+    cand: Option<&Candidate>,
+    points: &[Point],
+    subset: &[usize],
+    joint: &JointWhitener,
+    e0: f64,
+    theta0: f64,
+    max_iterations: usize,
+) -> Option<GlsFit> {
+    fit_objective(
+        model,
+        cand,
+        points,
+        subset,
+        Objective::Joint(joint),
+        e0,
+        theta0,
+        max_iterations,
+    )
+}
+
+#[allow(clippy::too_many_arguments)]
+fn fit_objective(
+    model: &Model<'_>,
+    cand: Option<&Candidate>,
+    points: &[Point],
+    subset: &[usize],
+    objective: Objective<'_>,
     e0: f64,
     theta0: f64,
     max_iterations: usize,
@@ -87,7 +149,21 @@ pub fn fit(
             }
             r[i] = points[i].a_mm - a;
         }
-        let w = whitener.whiten(&r);
+        let w = match objective {
+            Objective::Radius(whitener) => whitener.whiten(&r),
+            Objective::Joint(joint) => {
+                let mut r_p = vec![0.0; n_all];
+                for &i in subset {
+                    let p = predict_with(model, inc, cand, e, th, &points[i], Channel::Load);
+                    let v = Channel::Load.measured(&points[i]) - p;
+                    if !v.is_finite() {
+                        return None;
+                    }
+                    r_p[i] = v;
+                }
+                joint.whiten(&r, &r_p)
+            }
+        };
         Some((r, w))
     };
     let chi2 = |w: &[f64]| w.iter().map(|v| v * v).sum::<f64>();
@@ -168,14 +244,18 @@ pub fn fit(
                 .map_or(0.0, |(x, y)| linalg::dot(x, y));
         }
     }
-    let n = subset.len();
+    let n = match objective {
+        Objective::Radius(_) => subset.len(),
+        Objective::Joint(joint) => joint.len(),
+    };
     let dof = n.saturating_sub(k).max(1) as f64;
     let scale = (s / dof).max(1.0);
     let cov = linalg::inverse_spd(&jtj, k).unwrap_or_else(|| vec![f64::INFINITY; k * k]);
     let se_ln = (cov[0] * scale).sqrt();
     let se = |c: usize| (cov[c * k + c] * scale).sqrt();
     let theta_se = if c_off == 1 { se(1) } else { 0.0 };
-    let rms = (subset.iter().map(|&i| r[i] * r[i]).sum::<f64>() / n.max(1) as f64).sqrt();
+    let rms =
+        (subset.iter().map(|&i| r[i] * r[i]).sum::<f64>() / subset.len().max(1) as f64).sqrt();
     Some(GlsFit {
         modulus_kpa: q[0].exp(),
         ci95_kpa: [(q[0] - 1.96 * se_ln).exp(), (q[0] + 1.96 * se_ln).exp()],

@@ -67,8 +67,10 @@ pub fn step(
     options: &DiagnoseOptions,
 ) -> Option<StepOutcome> {
     let prelim = super::run_selection(model, cands, points, subset, whitener, e0, None, 0, None)?;
-    // the load channel, when every used point has a load (a prediction check of each refit)
-    let load = LoadChannel::new(model, points, subset, prelim.base.modulus_kpa);
+    // the load channel, when every used point has a load (a prediction check of each refit,
+    // and the joint fit of both channels that ranks the candidates)
+    let load = LoadChannel::new(model, points, subset, prelim.base.modulus_kpa)
+        .map(|lc| lc.with_joint(model, noise, points, subset, prelim.base.modulus_kpa));
     let threshold = selection::bootstrap_threshold(
         &prelim.sigs,
         whitener.len(),

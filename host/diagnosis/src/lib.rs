@@ -24,6 +24,7 @@ pub mod data;
 pub mod errors_in_variables;
 pub mod fitting;
 pub mod forward;
+pub mod joint;
 pub mod linalg;
 pub mod load_channel;
 pub mod localisation;
@@ -128,6 +129,22 @@ impl GapSummary {
     }
 }
 
+/// The named effect fitted to the radius and the load together ([`fitting::fit_joint`]).
+#[derive(Debug, Clone, Serialize)]
+pub struct JointSummary {
+    pub effect: String,
+    pub parameter: String,
+    pub value: f64,
+    pub se: f64,
+    pub modulus_kpa: f64,
+    pub ci95_kpa: [f64; 2],
+    /// Joint chi^2 of the model without the effect and with it, over `values` (two per
+    /// point).
+    pub baseline_chi2: f64,
+    pub chi2: f64,
+    pub values: usize,
+}
+
 /// An alternative to the named effect.
 #[derive(Debug, Clone, Serialize)]
 pub struct Alternative {
@@ -163,6 +180,9 @@ pub struct Diagnosis {
     pub ambiguity_pairs: Vec<AmbiguousPair>,
     pub minimum_detectable: Vec<MinimumDetectable>,
     pub held_out: Option<HeldOut>,
+    /// The named effect's parameters fitted to both channels (None without a load channel
+    /// with replicates, or when no effect is named); `parameters` are the radius fit's.
+    pub joint_fit: Option<JointSummary>,
     /// The effects of the final model of the forward selection, in the order they were
     /// added, with their jointly fitted parameters (the first is `effect`; empty when no
     /// effect is named).
@@ -452,12 +472,24 @@ pub fn diagnose(
         let mut hits = 0usize;
         let mut done = 0usize;
         for _ in 0..options.confidence_reruns {
-            let z: Vec<f64> = (0..whitener.len()).map(|_| g.normal()).collect();
-            let noise_v = whitener.colour(&z, points.len());
-            let noise_l = load.as_ref().map(|lc| {
-                let z: Vec<f64> = (0..lc.whitener.len()).map(|_| g.normal()).collect();
-                lc.whitener.colour(&z, points.len())
-            });
+            // both channels' noise drawn together (with the part the u_s reading shares)
+            // when the joint covariance exists, else each from its own
+            let (noise_v, noise_l) = match load.as_ref().and_then(|lc| lc.joint.as_ref()) {
+                Some(j) => {
+                    let z: Vec<f64> = (0..j.len()).map(|_| g.normal()).collect();
+                    let (v, l) = j.colour(&z, points.len());
+                    (v, Some(l))
+                }
+                None => {
+                    let z: Vec<f64> = (0..whitener.len()).map(|_| g.normal()).collect();
+                    let v = whitener.colour(&z, points.len());
+                    let l = load.as_ref().map(|lc| {
+                        let z: Vec<f64> = (0..lc.whitener.len()).map(|_| g.normal()).collect();
+                        lc.whitener.colour(&z, points.len())
+                    });
+                    (v, l)
+                }
+            };
             let sim: Vec<Point> = points
                 .iter()
                 .enumerate()
@@ -525,6 +557,25 @@ pub fn diagnose(
     let forward = forward::run(
         &model, &cands, &points, &subset, &noise, &whitener, options, &first,
     );
+    let joint_fit = match (&winner, named) {
+        (Some(w), true) => {
+            w.joint_fit
+                .as_ref()
+                .zip(w.delta_joint_chi2)
+                .map(|(j, d)| JointSummary {
+                    effect: w.effect.clone(),
+                    parameter: w.candidate.kind.parameter().0.to_string(),
+                    value: j.theta,
+                    se: j.theta_se,
+                    modulus_kpa: j.modulus_kpa,
+                    ci95_kpa: j.ci95_kpa,
+                    baseline_chi2: j.chi2 + d,
+                    chi2: j.chi2,
+                    values: j.points,
+                })
+        }
+        _ => None,
+    };
     let parameters = match (&winner, named) {
         (Some(w), true) => {
             let f = w.fit.as_ref();
@@ -648,6 +699,7 @@ pub fn diagnose(
         ambiguity_pairs,
         minimum_detectable,
         held_out: held,
+        joint_fit,
         effects: forward.effects.clone(),
         forward,
         points_used: n,

@@ -11,15 +11,21 @@
 //! ([`NoiseModel::estimate_channel`]: white, per-test offsets, smooth term, u_s noise through
 //! dP/du_s, and the table's own interpolation error of the load column).
 //!
-//! The candidates that pass are then ranked by chi^2_a + chi^2_P (two independent-noise
-//! channels, a sum of log-likelihoods up to constants; the u_s noise they share enters both
-//! alike for every candidate, so it shifts all sums nearly equally). The load channel never
-//! makes an effect out of nothing: detection stays with the calibrated a-channel threshold.
+//! Each refitted candidate is also fitted to the radius and the load together
+//! ([`LoadChannel::with_joint`], [`super::joint`]: generalised least squares over both
+//! channels, their covariance including the part the shared u_s reading makes common to
+//! both), and the candidates that pass are ranked by that joint chi^2; the report gives the
+//! joint fit's parameters beside the radius fit's. (Without the joint whitening, e.g. when
+//! its covariance is not positive definite, they are ranked by chi^2_a + chi^2_P.) The load
+//! channel never makes an effect out of nothing: detection stays with the calibrated
+//! a-channel threshold.
 
 use serde::Serialize;
 
 use super::candidates::{Candidate, predict, predict_fit};
 use super::data::Point;
+use super::fitting::GlsFit;
+use super::joint::JointWhitener;
 use super::model::{Channel, Model};
 use super::noise_model::{NoiseModel, PressureNoise, Whitener};
 
@@ -30,6 +36,8 @@ pub struct LoadChannel {
     pub whitener: Whitener,
     /// chi^2_P of the baseline GLS fit.
     pub baseline_chi2: f64,
+    /// Whitening of both channels together ([`LoadChannel::with_joint`]).
+    pub joint: Option<JointWhitener>,
 }
 
 /// Summary for the report.
@@ -65,9 +73,32 @@ impl LoadChannel {
             noise,
             whitener,
             baseline_chi2: 0.0,
+            joint: None,
         };
         lc.baseline_chi2 = lc.chi2(model, None, points, subset, e, 0.0)?;
         Some(lc)
+    }
+
+    /// Adds the joint whitening of both channels, from the radius channel's noise model
+    /// `radius` and both channels' baseline residuals at modulus `e` (None when the joint covariance is not positive definite; the selection then
+    /// ranks by the radius fit plus the load prediction).
+    pub fn with_joint(
+        mut self,
+        model: &Model<'_>,
+        radius: &NoiseModel,
+        points: &[Point],
+        subset: &[usize],
+        e: f64,
+    ) -> Self {
+        let residual = |ch: Channel| -> Vec<f64> {
+            points
+                .iter()
+                .map(|p| ch.measured(p) - predict(model, None, e, 0.0, p, ch))
+                .collect()
+        };
+        let (r_a, r_p) = (residual(Channel::Radius), residual(Channel::Load));
+        self.joint = JointWhitener::new(radius, &self.noise, points, subset, &r_a, &r_p);
+        self
     }
 
     /// chi^2_P of `cand` (None: the baseline) at (E2 = `e`, `theta`) over `points[subset]`.
@@ -100,7 +131,7 @@ impl LoadChannel {
         cand: Option<&Candidate>,
         points: &[Point],
         subset: &[usize],
-        f: &super::fitting::GlsFit,
+        f: &GlsFit,
     ) -> Option<f64> {
         let mut r = vec![0.0; points.len()];
         for &i in subset {

@@ -326,6 +326,26 @@ impl NoiseModel {
         })
     }
 
+    /// The channel's slope (da/du_s or dP/du_s) of the baseline at point `i`.
+    pub fn slope_at(&self, i: usize) -> f64 {
+        self.slope[i]
+    }
+
+    /// The white part of the variance at point `i` (in a, and in u_s through the slope).
+    pub fn white_variance(&self, points: &[Point], i: usize) -> f64 {
+        self.at(points[i].p_air_kpa).map_or(0.0, |n| {
+            n.white_mm.powi(2) + (n.white_u_mm * self.slope[i]).powi(2)
+        })
+    }
+
+    /// The constant per-test offset's standard deviation at pressure `p` (in the channel's
+    /// unit; 0 when assumed or unknown).
+    pub fn test_offset_mm(&self, p: f64) -> f64 {
+        self.at(p)
+            .filter(|n| !n.assumed)
+            .map_or(0.0, |n| n.test_offset_a_mm)
+    }
+
     pub fn any_assumed(&self) -> bool {
         self.pressures.iter().any(|p| p.assumed)
     }
@@ -487,14 +507,27 @@ fn mean(v: &[f64]) -> f64 {
     }
 }
 
-fn estimate_with_replicates(
+/// Replicate deviations at one pressure with each test's offset and u_s offset removed.
+pub(crate) struct WithinTest {
+    /// Per test: the offset at the mean slope and the u_s offset (regression of the
+    /// deviations on [1, s]).
+    pub coef: Vec<(f64, f64)>,
+    /// Per test: (point index, u_s, within-test residual, slope).
+    pub residuals: Vec<Vec<(usize, f64, f64, f64)>>,
+    /// Mean over tests of the within-test variance of the slope.
+    pub s_spread: f64,
+}
+
+/// The replicate deviations d = r - m(u_s) at the points `idx` of one pressure (m the mean
+/// residual in u_s bins, inflated by m/(m-1) for the bin mean's own share), regressed on
+/// [1, s] per test (s = the channel's slope): [`WithinTest`].
+pub(crate) fn within_test(
     points: &[Point],
     r: &[f64],
     slope: &[f64],
     idx: &[usize],
     tests: &[u32],
-    p: f64,
-) -> PressureNoise {
+) -> WithinTest {
     let m = tests.len() as f64;
     let per_test = idx.len() as f64 / m;
     let k = ((per_test / 1.5).round() as usize).clamp(4, 60);
@@ -513,7 +546,7 @@ fn estimate_with_replicates(
         .collect();
     // per-test regression of d on [1, s]
     let mut coef: Vec<(f64, f64)> = Vec::new();
-    let mut e_all: Vec<Vec<(f64, f64, f64)>> = Vec::new(); // (u, e, slope) per test
+    let mut e_all: Vec<Vec<(usize, f64, f64, f64)>> = Vec::new();
     let mut s_spread = 0.0;
     for &t in tests {
         let js: Vec<usize> = (0..idx.len())
@@ -542,10 +575,34 @@ fn estimate_with_replicates(
             js.iter()
                 .zip(&s)
                 .zip(&y)
-                .map(|((&j, sv), yv)| (points[idx[j]].u_s_mm, yv - a0 - b * sv, *sv))
+                .map(|((&j, sv), yv)| (idx[j], points[idx[j]].u_s_mm, yv - a0 - b * sv, *sv))
                 .collect(),
         );
     }
+    WithinTest {
+        coef,
+        residuals: e_all,
+        s_spread,
+    }
+}
+
+fn estimate_with_replicates(
+    points: &[Point],
+    r: &[f64],
+    slope: &[f64],
+    idx: &[usize],
+    tests: &[u32],
+    p: f64,
+) -> PressureNoise {
+    let WithinTest {
+        coef,
+        residuals,
+        s_spread,
+    } = within_test(points, r, slope, idx, tests);
+    let e_all: Vec<Vec<(f64, f64, f64)>> = residuals
+        .iter()
+        .map(|t| t.iter().map(|&(_, u, e, s)| (u, e, s)).collect())
+        .collect();
     let n_e: usize = e_all.iter().map(Vec::len).sum();
     let dof_factor = n_e as f64 / (n_e.saturating_sub(2 * e_all.len()).max(1)) as f64;
     // variance model v = v_a + v_u s^2 by least squares of e^2 on s^2 (both >= 0)

@@ -42,6 +42,21 @@ pub fn text(d: &Diagnosis) -> String {
             }
         }
     }
+    if let Some(j) = &d.joint_fit {
+        let _ = writeln!(
+            s,
+            "  fitted to the radius and the load together: {} = {:.4} +- {:.4} (1 se), E2 = {:.1} kPa ({:.1} .. {:.1}); joint chi2 {:.1} -> {:.1} over {} values",
+            j.parameter,
+            j.value,
+            j.se,
+            j.modulus_kpa,
+            j.ci95_kpa[0],
+            j.ci95_kpa[1],
+            j.baseline_chi2,
+            j.chi2,
+            j.values
+        );
+    }
     let _ = writeln!(
         s,
         "\nnoise model{}:",
@@ -147,8 +162,16 @@ pub fn text(d: &Diagnosis) -> String {
     }
     let _ = writeln!(
         s,
-        "\ncandidates (chi2 improvements; threshold: 95th percentile of the largest null improvement = {:.2}, {} bootstrap draws; ranked by the refit plus the load prediction):",
-        d.threshold.delta_chi2_95, d.threshold.replicates
+        "\ncandidates (chi2 improvements; threshold: 95th percentile of the largest null improvement = {:.2}, {} bootstrap draws; ranked by {}):",
+        d.threshold.delta_chi2_95,
+        d.threshold.replicates,
+        if d.candidates.iter().any(|c| c.joint_fit.is_some()) {
+            "the joint fit of the radius and the load"
+        } else if d.load_channel.is_some() {
+            "the refit plus the load prediction"
+        } else {
+            "the refit of the radius"
+        }
     );
     for c in &d.candidates {
         let _ = writeln!(
@@ -177,10 +200,18 @@ pub fn text(d: &Diagnosis) -> String {
                     " (does not confirm)"
                 }
             )),
-            c.fit.as_ref().map_or(String::new(), |f| format!(
-                "  theta {:.4} +- {:.4}",
-                f.theta, f.theta_se
-            )),
+            match (&c.fit, &c.joint_fit) {
+                (Some(f), Some(j)) => format!(
+                    "  theta {:.4} +- {:.4}; both channels: joint {:.2}, theta {:.4} +- {:.4}",
+                    f.theta,
+                    f.theta_se,
+                    c.delta_joint_chi2.unwrap_or(f64::NAN),
+                    j.theta,
+                    j.theta_se
+                ),
+                (Some(f), None) => format!("  theta {:.4} +- {:.4}", f.theta, f.theta_se),
+                _ => String::new(),
+            },
         );
     }
     if !d.ambiguity_pairs.is_empty() {

@@ -29,7 +29,7 @@ use serde::Serialize;
 
 use super::candidates::Candidate;
 use super::data::Point;
-use super::fitting::{GlsFit, fit};
+use super::fitting::{GlsFit, fit, fit_joint};
 use super::load_channel::LoadChannel;
 use super::model::{Channel, Model};
 use super::noise_model::NoiseModel;
@@ -338,11 +338,21 @@ pub struct Screened {
     pub load_chi2: Option<f64>,
     /// Baseline minus candidate chi^2 of the load channel.
     pub delta_load_chi2: Option<f64>,
+    /// The fit to both channels together ([`super::fitting::fit_joint`]); None without a
+    /// joint whitening.
+    pub joint_fit: Option<GlsFit>,
+    /// Joint chi^2 of the model without the candidate minus the candidate's.
+    pub delta_joint_chi2: Option<f64>,
 }
 
 impl Screened {
-    /// chi^2 of the refit over both channels (the ranking key; infinite when not refitted).
+    /// chi^2 over both channels (the ranking key; infinite when not refitted): the joint
+    /// fit's when there is one, else the radius refit's plus its load prediction's (the
+    /// radius refit's alone without loads).
     pub fn total_chi2(&self) -> f64 {
+        if let Some(j) = &self.joint_fit {
+            return j.chi2;
+        }
         self.fit
             .as_ref()
             .map_or(f64::INFINITY, |f| f.chi2 + self.load_chi2.unwrap_or(0.0))
@@ -383,10 +393,20 @@ pub fn screen_and_refit(
             passes_threshold: false,
             load_chi2: None,
             delta_load_chi2: None,
+            joint_fit: None,
+            delta_joint_chi2: None,
         })
         .collect();
     out.sort_by(|a, b| b.screen_delta_chi2.total_cmp(&a.screen_delta_chi2));
     let n = subset.len() as f64;
+    // the model's own fit to both channels, against which the joint refits are measured
+    let joint = load.and_then(|lc| {
+        let j = lc.joint.as_ref()?;
+        Some((
+            j,
+            fit_joint(model, None, points, subset, j, base.modulus_kpa, 0.0, 40)?,
+        ))
+    });
     let mut refitted_kinds = Vec::new();
     for s in out.iter_mut() {
         if refitted_kinds.len() >= refit {
@@ -430,6 +450,24 @@ pub fn screen_and_refit(
                     .unwrap_or(lc.baseline_chi2);
                 s.load_chi2 = Some(l);
                 s.delta_load_chi2 = Some(lc.baseline_chi2 - l);
+                if let Some((j, bj)) = &joint {
+                    // from the radius fit and from the same starts as the radius refit
+                    let mut best: Option<GlsFit> = None;
+                    for (e0, t0) in [
+                        (f.modulus_kpa, f.theta),
+                        (base.modulus_kpa, theta0),
+                        (base.modulus_kpa, s.candidate.kind.step() * 5.0),
+                    ] {
+                        if let Some(jf) =
+                            fit_joint(model, Some(&s.candidate), points, subset, j, e0, t0, 40)
+                            && best.as_ref().is_none_or(|b| jf.chi2 < b.chi2)
+                        {
+                            best = Some(jf);
+                        }
+                    }
+                    s.delta_joint_chi2 = best.as_ref().map(|jf| bj.chi2 - jf.chi2);
+                    s.joint_fit = best;
+                }
             }
             s.fit = Some(f);
         }

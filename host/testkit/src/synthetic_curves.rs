@@ -21,6 +21,11 @@ pub struct SyntheticSpec {
     pub offset_a_mm: f64,
     pub white_load_n: f64,
     pub offset_load_n: f64,
+    /// White noise and per-test offset of the u_s reading (mm): the point's u_s is the
+    /// reading, while a and the load are the truth's at the true u_s, so both channels
+    /// share this error (as the proximity sensor's reading is shared on the bench).
+    pub white_u_mm: f64,
+    pub offset_u_mm: f64,
     pub seed: u64,
 }
 
@@ -36,6 +41,8 @@ impl Default for SyntheticSpec {
             offset_a_mm: 0.002,
             white_load_n: 1e-3,
             offset_load_n: 1e-3,
+            white_u_mm: 0.0,
+            offset_u_mm: 0.0,
             seed: 1,
         }
     }
@@ -58,6 +65,12 @@ pub fn generate(
         for test in 0..spec.replicates {
             let off_a = spec.offset_a_mm * g.normal();
             let off_load = spec.offset_load_n * g.normal();
+            // drawn only when asked for, so that specs without u_s noise keep their draws
+            let off_u = if spec.offset_u_mm > 0.0 {
+                spec.offset_u_mm * g.normal()
+            } else {
+                0.0
+            };
             for k in 0..n {
                 let mut pt = Point {
                     u_s_mm: u0 + (u1 - u0) * f64::from(k) / f64::from(n - 1),
@@ -73,6 +86,9 @@ pub fn generate(
                 let load = predict(model, cand, e, theta, &pt, Channel::Load);
                 pt.a_mm = a + extra(pt.u_s_mm) + off_a + spec.white_a_mm * g.normal();
                 pt.load_n = Some(load + off_load + spec.white_load_n * g.normal());
+                if spec.white_u_mm > 0.0 || spec.offset_u_mm > 0.0 {
+                    pt.u_s_mm += off_u + spec.white_u_mm * g.normal();
+                }
                 out.push(pt);
             }
         }
