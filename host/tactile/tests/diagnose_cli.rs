@@ -147,6 +147,22 @@ fn json_carries_the_documented_fields_and_names_a_camera_scale() {
         d["load_channel"].is_object(),
         "loads present: the channel is used"
     );
+    // the scale fitted to the radius and the load together: the same scale within 3 of its
+    // standard errors (a camera scale leaves the loads alone, so they only pin E2 down)
+    let j = &d["joint_fit"];
+    assert_eq!(j["parameter"], "radius_scale_minus_1", "{j:#}");
+    let (jv, jse) = (
+        j["value"].as_f64().expect("joint value"),
+        j["se"].as_f64().expect("joint se"),
+    );
+    assert!(
+        (jv - 0.03).abs() < 3.0 * jse.max(1e-4),
+        "joint {jv} +- {jse}"
+    );
+    assert_eq!(
+        j["values"].as_u64(),
+        d["points_used"].as_u64().map(|n| 2 * n)
+    );
     // --out wrote the report, the same JSON and the residual plots of both channels
     let out = dir.join("out");
     let written: serde_json::Value = serde_json::from_str(
