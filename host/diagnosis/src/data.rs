@@ -93,6 +93,23 @@ pub fn pressures(points: &[Point]) -> Vec<f64> {
     v
 }
 
+/// The indices of `order` at each pressure (increasing; pressures without any left out),
+/// in the order given.
+pub fn indices_by_pressure(points: &[Point], order: &[usize]) -> Vec<(f64, Vec<usize>)> {
+    pressures(points)
+        .into_iter()
+        .map(|p| {
+            let idx: Vec<usize> = order
+                .iter()
+                .copied()
+                .filter(|&i| points[i].p_air_kpa == p)
+                .collect();
+            (p, idx)
+        })
+        .filter(|(_, idx)| !idx.is_empty())
+        .collect()
+}
+
 /// Distinct replicate ids at pressure `p`.
 pub fn tests_at(points: &[Point], p: f64) -> Vec<u32> {
     let mut v: Vec<u32> = points

@@ -5,7 +5,7 @@
 //! whitened units, inflated by max(1, chi^2/dof) when the fit is poor (the usual
 //! scale-factor correction), and the 95 % interval of E2 is exp(ln E2 +- 1.96 se).
 //!
-//! [`fit_joint`] minimises the joint chi^2 of the radius and the load instead
+//! [`fit_to`] with [`Objective::Joint`] minimises the joint chi^2 of the radius and the load instead
 //! ([`super::joint`]), the same algorithm on the stacked whitened residuals.
 //!
 //! When the model already includes effects ([`Model::included`], added by the forward
@@ -48,8 +48,8 @@ pub struct GlsFit {
 }
 
 /// What a fit minimises: the radius channel's chi^2, or both channels' joint chi^2.
-#[derive(Clone, Copy)]
-enum Objective<'w> {
+#[derive(Debug, Clone, Copy)]
+pub enum Objective<'w> {
     Radius(&'w Whitener),
     Joint(&'w JointWhitener),
 }
@@ -67,7 +67,7 @@ pub fn fit(
     theta0: f64,
     max_iterations: usize,
 ) -> Option<GlsFit> {
-    fit_objective(
+    fit_to(
         model,
         cand,
         points,
@@ -79,35 +79,12 @@ pub fn fit(
     )
 }
 
-/// Fits `cand` (or the baseline) to the contact radius and the load of `points[subset]`
-/// together ([`super::joint`]); every point needs a load. The result's chi^2, points and
-/// whitened values are over both channels; `residuals_mm` and `rms_residual_mm` are the
-/// radius's.
+/// Fits `cand` (or the baseline) to `points[subset]` under `objective` starting at
+/// (e0, theta0). With [`Objective::Joint`] every point needs a load, and the result's chi^2,
+/// points and whitened values are over both channels; `residuals_mm` and `rms_residual_mm`
+/// are the radius's.
 #[allow(clippy::too_many_arguments)]
-pub fn fit_joint(
-    model: &Model<'_>,
-    cand: Option<&Candidate>,
-    points: &[Point],
-    subset: &[usize],
-    joint: &JointWhitener,
-    e0: f64,
-    theta0: f64,
-    max_iterations: usize,
-) -> Option<GlsFit> {
-    fit_objective(
-        model,
-        cand,
-        points,
-        subset,
-        Objective::Joint(joint),
-        e0,
-        theta0,
-        max_iterations,
-    )
-}
-
-#[allow(clippy::too_many_arguments)]
-fn fit_objective(
+pub fn fit_to(
     model: &Model<'_>,
     cand: Option<&Candidate>,
     points: &[Point],

@@ -33,7 +33,7 @@
 //! log-likelihood of both channels up to a constant (generalised least squares, e.g. Seber
 //! & Wild, *Nonlinear Regression*, 1989, sec. 2.1.4); with C_aP = 0 it is the sum of the
 //! two channels' chi^2. Fitting a candidate's parameters to it
-//! ([`super::fitting::fit_joint`]) lets the load decide what the radius leaves open
+//! ([`super::fitting::fit_to`]) lets the load decide what the radius leaves open
 //! (friction and a camera scale change a(u_s) alike; only friction changes P).
 //!
 //! Blocks are per pressure (no covariance across pressures), each of size 2 n_p.
@@ -48,7 +48,7 @@ pub struct JointWhitener {
     blocks: Vec<Block>,
     len: usize,
     /// Per pressure: (p_air in kPa, the shared white u_s error's standard deviation in mm,
-    /// [`shared_white_u_variance`]).
+    /// [`shared_parts`]).
     pub shared_white_u_mm: Vec<(f64, f64)>,
 }
 
@@ -56,25 +56,14 @@ pub struct JointWhitener {
 /// offsets: of the constant per-test offsets).
 const MAX_WHITE_CORRELATION: f64 = 0.95;
 
-/// The shared white u_s variance sigma_x^2 (mm^2) at the points `idx` of one pressure:
-/// least squares through the origin of e_a e_P on s_a s_P over the within-test residuals of
-/// both channels (radius residuals `r_a`, load residuals `r_p`), with the same degrees-of-
-/// freedom correction as the channels' own white variances (two coefficients per test
-/// removed); 0 when negative or without replicates.
-pub fn shared_white_u_variance(
-    radius: &NoiseModel,
-    load: &NoiseModel,
-    points: &[Point],
-    idx: &[usize],
-    r_a: &[f64],
-    r_p: &[f64],
-) -> f64 {
-    shared_parts(radius, load, points, idx, r_a, r_p).0
-}
-
-/// The shared white u_s variance ([`shared_white_u_variance`]) and the per-test offset
-/// covariance c of the two channels (mm N, before its bounds; module notes).
-fn shared_parts(
+/// What the two channels share at the points `idx` of one pressure (module notes):
+/// (sigma_x^2, the white u_s variance in mm^2, and c, the per-test offsets' covariance in
+/// mm N before its bounds). sigma_x^2 is the least-squares fit through the origin of
+/// e_a e_P on s_a s_P over the within-test residuals of both channels (radius residuals
+/// `r_a`, load residuals `r_p`), with the same degrees-of-freedom correction as the
+/// channels' own white variances (two coefficients per test removed); both 0 when negative
+/// or without replicates.
+pub fn shared_parts(
     radius: &NoiseModel,
     load: &NoiseModel,
     points: &[Point],
@@ -146,15 +135,7 @@ impl JointWhitener {
     ) -> Option<Self> {
         let mut blocks = Vec::new();
         let mut shared_white_u_mm = Vec::new();
-        for p in super::data::pressures(points) {
-            let idx: Vec<usize> = subset
-                .iter()
-                .copied()
-                .filter(|&i| points[i].p_air_kpa == p)
-                .collect();
-            if idx.is_empty() {
-                continue;
-            }
+        for (p, idx) in super::data::indices_by_pressure(points, subset) {
             let n = idx.len();
             let m = 2 * n;
             let (var_x, c_offset) = shared_parts(radius, load, points, &idx, r_a, r_p);

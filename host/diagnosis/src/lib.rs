@@ -129,7 +129,7 @@ impl GapSummary {
     }
 }
 
-/// The named effect fitted to the radius and the load together ([`fitting::fit_joint`]).
+/// The named effect fitted to the radius and the load together ([`fitting::fit_to`]).
 #[derive(Debug, Clone, Serialize)]
 pub struct JointSummary {
     pub effect: String,

@@ -120,15 +120,7 @@ pub fn a_channel(
     r: &[f64],
 ) -> (Vec<Cell>, RunsTest, LackOfFit) {
     let mut cells = Vec::new();
-    for p in super::data::pressures(points) {
-        let idx: Vec<usize> = order
-            .iter()
-            .copied()
-            .filter(|&i| points[i].p_air_kpa == p)
-            .collect();
-        if idx.is_empty() {
-            continue;
-        }
+    for (p, idx) in super::data::indices_by_pressure(points, order) {
         let wins = windows_of(points, &idx);
         for (k, win) in wins.iter().enumerate() {
             let last = k + 1 == wins.len();
@@ -257,15 +249,7 @@ pub fn load_channel(points: &[Point], subset: &[usize], rl: &[f64]) -> Vec<Cell>
 /// Windows for the apparent-modulus fits: (pressure, u_s range, point indices).
 pub fn modulus_windows(points: &[Point], subset: &[usize]) -> Vec<(f64, [f64; 2], Vec<usize>)> {
     let mut out = Vec::new();
-    for p in super::data::pressures(points) {
-        let idx: Vec<usize> = subset
-            .iter()
-            .copied()
-            .filter(|&i| points[i].p_air_kpa == p)
-            .collect();
-        if idx.is_empty() {
-            continue;
-        }
+    for (p, idx) in super::data::indices_by_pressure(points, subset) {
         let wins = windows_of(points, &idx);
         for (k, w) in wins.iter().enumerate() {
             let last = k + 1 == wins.len();

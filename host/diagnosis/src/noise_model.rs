@@ -391,15 +391,7 @@ impl NoiseModel {
     pub fn whitener(&self, points: &[Point], subset: &[usize]) -> Option<Whitener> {
         // blocks per pressure (the covariance is zero across pressures)
         let mut blocks: Vec<Block> = Vec::new();
-        for p in super::data::pressures(points) {
-            let idx: Vec<usize> = subset
-                .iter()
-                .copied()
-                .filter(|&i| points[i].p_air_kpa == p)
-                .collect();
-            if idx.is_empty() {
-                continue;
-            }
+        for (_, idx) in super::data::indices_by_pressure(points, subset) {
             let n = idx.len();
             let mut c = vec![0.0; n * n];
             let mut diag_mean = 0.0;

@@ -29,7 +29,7 @@ use serde::Serialize;
 
 use super::candidates::Candidate;
 use super::data::Point;
-use super::fitting::{GlsFit, fit, fit_joint};
+use super::fitting::{GlsFit, Objective, fit, fit_to};
 use super::load_channel::LoadChannel;
 use super::model::{Channel, Model};
 use super::noise_model::NoiseModel;
@@ -338,7 +338,7 @@ pub struct Screened {
     pub load_chi2: Option<f64>,
     /// Baseline minus candidate chi^2 of the load channel.
     pub delta_load_chi2: Option<f64>,
-    /// The fit to both channels together ([`super::fitting::fit_joint`]); None without a
+    /// The fit to both channels together ([`super::fitting::fit_to`]); None without a
     /// joint whitening.
     pub joint_fit: Option<GlsFit>,
     /// Joint chi^2 of the model without the candidate minus the candidate's.
@@ -404,7 +404,16 @@ pub fn screen_and_refit(
         let j = lc.joint.as_ref()?;
         Some((
             j,
-            fit_joint(model, None, points, subset, j, base.modulus_kpa, 0.0, 40)?,
+            fit_to(
+                model,
+                None,
+                points,
+                subset,
+                Objective::Joint(j),
+                base.modulus_kpa,
+                0.0,
+                40,
+            )?,
         ))
     });
     let mut refitted_kinds = Vec::new();
@@ -458,9 +467,16 @@ pub fn screen_and_refit(
                         (base.modulus_kpa, theta0),
                         (base.modulus_kpa, s.candidate.kind.step() * 5.0),
                     ] {
-                        if let Some(jf) =
-                            fit_joint(model, Some(&s.candidate), points, subset, j, e0, t0, 40)
-                            && best.as_ref().is_none_or(|b| jf.chi2 < b.chi2)
+                        if let Some(jf) = fit_to(
+                            model,
+                            Some(&s.candidate),
+                            points,
+                            subset,
+                            Objective::Joint(j),
+                            e0,
+                            t0,
+                            40,
+                        ) && best.as_ref().is_none_or(|b| jf.chi2 < b.chi2)
                         {
                             best = Some(jf);
                         }

@@ -9,7 +9,7 @@
 
 use diagnosis::candidates::{Candidate, EffectKind, predict};
 use diagnosis::data::Point;
-use diagnosis::fitting::{fit, fit_joint};
+use diagnosis::fitting::{Objective, fit, fit_to};
 use diagnosis::joint::JointWhitener;
 use diagnosis::load_channel::LoadChannel;
 use diagnosis::model::{Channel, Model};
@@ -290,9 +290,28 @@ fn friction_fitted_to_both_channels_is_better_determined_than_from_the_radius() 
         .with_joint(&model, &noise_a, &pts, &all, TRUE_MODULUS_KPA);
     let joint = load.joint.as_ref().expect("joint whitener");
     let radius_f = fit(&model, Some(&friction), &pts, &all, &wa, 170.0, 0.1, 40).expect("fit");
-    let joint_f =
-        fit_joint(&model, Some(&friction), &pts, &all, joint, 170.0, 0.1, 40).expect("fit");
-    let joint_s = fit_joint(&model, Some(&scale), &pts, &all, joint, 170.0, 0.01, 40).expect("fit");
+    let joint_f = fit_to(
+        &model,
+        Some(&friction),
+        &pts,
+        &all,
+        Objective::Joint(joint),
+        170.0,
+        0.1,
+        40,
+    )
+    .expect("fit");
+    let joint_s = fit_to(
+        &model,
+        Some(&scale),
+        &pts,
+        &all,
+        Objective::Joint(joint),
+        170.0,
+        0.01,
+        40,
+    )
+    .expect("fit");
     eprintln!(
         "mu: radius fit {:.3} +- {:.3} (E2 {:.1}), joint fit {:.3} +- {:.3} (E2 {:.1} kPa, {:.1} .. {:.1}); joint chi2: friction {:.1}, radius_scale {:.1} over {} values",
         radius_f.theta,
