@@ -135,7 +135,7 @@ pub struct LoadCellConfig {
     /// Conversions per second (80 or 10).
     pub rate_sps: f64,
     /// Actual scale (the firmware reports a nominal 437 965 counts/N; real cells differ by
-    /// a few per cent, which the host's calibration removes).
+    /// a few per cent, which the host's rigid-sample sweep calibrates and removes).
     pub counts_per_n: f64,
     /// Bridge offset at zero load.
     pub offset_counts: f64,

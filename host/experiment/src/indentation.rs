@@ -79,13 +79,25 @@ pub struct IndentationResult {
     pub manometer_mean_kpa: f64,
 }
 
+/// The calibrations a run converts its raw samples with.
+#[derive(Debug, Clone, Copy)]
+pub struct SampleCalibration<'c> {
+    /// The proximity sensor at the run's pressure.
+    pub proximity: &'c ProximityCalibration,
+    /// Manometer reading at zero gauge pressure.
+    pub manometer_zero_kpa: f64,
+    /// The load cell's reading with the nominal scale per newton of load (1 when not
+    /// calibrated): loads are divided by it.
+    pub load_scale: f64,
+}
+
 /// Converts a raw sample with the calibrations.
 fn displacement(
     link: &Link,
     s: &TimedSample,
-    proximity: &ProximityCalibration,
-    manometer_zero_kpa: f64,
+    cal: &SampleCalibration<'_>,
 ) -> Option<DisplacementSample> {
+    let (proximity, manometer_zero_kpa) = (cal.proximity, cal.manometer_zero_kpa);
     let u = link.units();
     let volts = u.proximity_v(s.sample.proximity_counts?);
     let p_air_kpa = s
@@ -97,7 +109,7 @@ fn displacement(
         // the apex mirror moves with the inflation: corrected to the calibration pressure
         u_s_mm: proximity.u_s_mm_at(volts, p_air_kpa).ok()?,
         stage_mm: u.stage_mm(s.sample.stage_steps?),
-        load_n: s.sample.load_counts.map(|c| u.load_n(c)),
+        load_n: s.sample.load_counts.map(|c| u.load_n(c) / cal.load_scale),
         p_air_kpa,
     })
 }
@@ -244,8 +256,7 @@ pub fn run_indentation(
     link: &mut Link,
     radius: &mut dyn RadiusSource,
     plan: &IndentationPlan,
-    proximity: &ProximityCalibration,
-    manometer_zero_kpa: f64,
+    cal: &SampleCalibration<'_>,
     record: &RecordDir,
     progress: &indicatif::ProgressBar,
 ) -> Result<IndentationResult, ExperimentError> {
@@ -263,7 +274,7 @@ pub fn run_indentation(
     // 1. pressure
     progress.set_message(format!("settling {} kPa", plan.pressure_kpa));
     link.call(endpoints::SetPressure {
-        setpoint_kpa: (plan.pressure_kpa + manometer_zero_kpa) as f32,
+        setpoint_kpa: (plan.pressure_kpa + cal.manometer_zero_kpa) as f32,
     })?;
     let settle_start = host_clock::now_us();
     loop {
@@ -280,7 +291,7 @@ pub fn run_indentation(
             .rev()
             .take(usize::from(plan.stream_rate_hz) / 4)
             .filter_map(|s| s.sample.manometer_counts)
-            .map(|c| link.units().manometer_kpa(c) - manometer_zero_kpa)
+            .map(|c| link.units().manometer_kpa(c) - cal.manometer_zero_kpa)
             .collect();
         let elapsed_s = (host_clock::now_us() - settle_start) as f64 * 1e-6;
         if recent.len() > 10
@@ -378,10 +389,21 @@ pub fn run_indentation(
             }
         }
     }
-    let disp: Vec<DisplacementSample> = samples
+    let mut disp: Vec<DisplacementSample> = samples
         .iter()
-        .filter_map(|s| displacement(link, s, proximity, manometer_zero_kpa))
+        .filter_map(|s| displacement(link, s, cal))
         .collect();
+    let units = link.units();
+    let conversions: Vec<(f64, f64)> = samples
+        .iter()
+        .filter(|s| s.sample.status.0 & StatusFlags::LOAD_FRESH != 0)
+        .filter_map(|s| {
+            s.sample
+                .load_counts
+                .map(|c| (s.host_time_us, units.load_n(c) / cal.load_scale))
+        })
+        .collect();
+    super::pairing::interpolate_loads(&mut disp, &conversions);
     let t_origin = disp.first().map(|d| d.host_time_us).unwrap_or(0.0);
     // Cycles are cut from the data, not the wall clock: each excursion of the stage beyond
     // the start position (by more than 10 µm) is one indentation.

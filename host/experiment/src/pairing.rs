@@ -21,6 +21,36 @@ pub struct DisplacementSample {
     pub p_air_kpa: f64,
 }
 
+/// Re-reads each sample's load at the sample's time from the load cell's conversions.
+///
+/// The cell converts at its own rate (80 per second) and the stream repeats its latest
+/// conversion in every sample, so a held load lags the displacement sampled with it by up to
+/// a conversion period (12.5 ms: ~10 µm of u_s at 1 mm/s, a few mN where P(u_s) is steep).
+/// `conversions` are (host time, load) of each new conversion, at the time of the sample
+/// that first carried it (the `LOAD_FRESH` status flag), in time order; a sample between
+/// two of them gets the linear interpolation, a sample before the first or after the last
+/// keeps its held value. (The conversion itself, an average over its period on an HX711,
+/// is taken to represent the load at its arrival.)
+pub fn interpolate_loads(samples: &mut [DisplacementSample], conversions: &[(f64, f64)]) {
+    if conversions.len() < 2 {
+        return;
+    }
+    for s in samples.iter_mut() {
+        if s.load_n.is_none() {
+            continue;
+        }
+        let t = s.host_time_us;
+        let k = conversions.partition_point(|c| c.0 <= t);
+        if k == 0 || k == conversions.len() {
+            continue;
+        }
+        let ((t0, l0), (t1, l1)) = (conversions[k - 1], conversions[k]);
+        if t1 > t0 {
+            s.load_n = Some(l0 + (l1 - l0) * (t - t0) / (t1 - t0));
+        }
+    }
+}
+
 /// One measured contact radius.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RadiusSample {
@@ -121,6 +151,46 @@ pub fn is_possible_contact_radius(a_mm: f64) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn held_loads_are_reread_between_conversions() {
+        // a load rising at 0.3 N/s, converted every 12.5 ms (80 per second), streamed at
+        // 2 kHz with the latest conversion held: held, each sample reads up to 3.75 mN low
+        // (0.3 N/s x 12.5 ms); re-read between conversions, the ramp exactly
+        let load = |t_us: f64| 0.3 * t_us * 1e-6;
+        let period_us = 12_500.0;
+        let mut samples = Vec::new();
+        let mut conversions = Vec::new();
+        let mut last_conversion: Option<f64> = None;
+        for k in 0..400 {
+            let t = 500.0 * f64::from(k);
+            if last_conversion.is_none_or(|c| t - c >= period_us) {
+                last_conversion = Some(t);
+                conversions.push((t, load(t)));
+            }
+            samples.push(DisplacementSample {
+                host_time_us: t,
+                u_s_mm: 0.0,
+                stage_mm: 0.0,
+                load_n: last_conversion.map(load),
+                p_air_kpa: 6.0,
+            });
+        }
+        let worst_held = samples
+            .iter()
+            .map(|s| (s.load_n.unwrap_or(f64::NAN) - load(s.host_time_us)).abs())
+            .fold(0.0, f64::max);
+        assert!(worst_held > 3.5e-3, "held error {worst_held}");
+        interpolate_loads(&mut samples, &conversions);
+        let last = conversions.last().map_or(0.0, |c| c.0);
+        for s in samples.iter().filter(|s| s.host_time_us <= last) {
+            let err = (s.load_n.unwrap_or(f64::NAN) - load(s.host_time_us)).abs();
+            assert!(err < 1e-12, "at {} us: {err}", s.host_time_us);
+        }
+        // after the last conversion the held value stays
+        let tail = samples.last().map(|s| s.load_n);
+        assert_eq!(tail, Some(conversions.last().map(|c| c.1)));
+    }
 
     #[test]
     fn radii_beyond_the_shell_are_left_out() {

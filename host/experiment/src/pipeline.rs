@@ -225,7 +225,12 @@ pub fn run_experiment<'a>(
     let radius = make_radius(link, px).map_err(RunError::Camera)?;
     let latency_s = calibration.camera_latency_s.unwrap_or(0.0);
     let mut radius = crate::camera_latency::LatencyCorrected::new(radius, latency_s);
-    let run = run_indentation(link, &mut radius, plan, &proximity, zero, record, progress);
+    let sensors = crate::indentation::SampleCalibration {
+        proximity: &proximity,
+        manometer_zero_kpa: zero,
+        load_scale: calibration.load_scale_at(plan.pressure_kpa).unwrap_or(1.0),
+    };
+    let run = run_indentation(link, &mut radius, plan, &sensors, record, progress);
     let stats = link.stats();
     let (unmeasured, dropped) = radius.failures();
     drop(radius);

@@ -180,6 +180,44 @@ impl RecordMeta {
     }
 }
 
+/// Why a record folder has no curve to analyse.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordCurveError {
+    #[error(transparent)]
+    Meta(#[from] RecordError),
+    #[error(
+        "{dir}: the record's status is \"{status}\": only complete or partial records have a curve to analyse"
+    )]
+    NotFinished { dir: String, status: String },
+    #[error(transparent)]
+    Curve(#[from] fit::curve_csv::CurveCsvError),
+}
+
+/// The curve of a record folder: its `curve.csv`, at the record's nominal pressure (the
+/// plan's set point from `meta.json`; the per-row manometer readings scatter around it, and
+/// grouping by them would split one pressure into many). A record still running or failed
+/// is refused by name.
+pub fn record_curve_at_set_pressure(
+    dir: &std::path::Path,
+) -> Result<fit::curve_csv::CurveCsv, RecordCurveError> {
+    let meta = RecordMeta::read(dir)?;
+    if matches!(meta.status, RecordStatus::Running | RecordStatus::Failed(_)) {
+        return Err(RecordCurveError::NotFinished {
+            dir: dir.display().to_string(),
+            status: String::from(meta.status),
+        });
+    }
+    let mut curve = fit::curve_csv::read_curve_csv(&dir.join("curve.csv"))?;
+    for row in &mut curve.rows {
+        row.p_air_kpa = None;
+    }
+    curve.metadata.retain(|(k, _)| k != "p_air_kpa");
+    curve
+        .metadata
+        .push(("p_air_kpa".into(), format!("{}", meta.plan.pressure_kpa)));
+    Ok(curve)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

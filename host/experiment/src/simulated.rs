@@ -464,7 +464,10 @@ pub fn demo_scenario(modulus_kpa: f64, pressure_kpa: f64, seed: u64) -> Scenario
 }
 
 /// The rigid-sample bench of `scenario`: the same bench with a sample 50 000 times stiffer
-/// than the shell, solved by fem-core like the measurement's mechanics (no faults).
+/// than the shell, solved by fem-core like the measurement's mechanics (no faults). The
+/// instrument's own effects (camera, proximity sensor, manometer, tilt) stay; the measured
+/// sample's (friction, viscoelastic relaxation, strain stiffening, adhesion) are not the
+/// rigid reference's, which is frictionless like the host's model of it.
 pub fn rigid_scenario(scenario: &Scenario, pressure_kpa: f64) -> Scenario {
     let mut rigid = scenario.clone();
     rigid.name = format!("{}-rigid-calibration", scenario.name);
@@ -478,6 +481,11 @@ pub fn rigid_scenario(scenario: &Scenario, pressure_kpa: f64) -> Scenario {
         edge_band: false,
     };
     rigid.faults = Default::default();
+    rigid.sample.stiffening = 0.0;
+    rigid.sample.friction = 0.0;
+    rigid.effects.viscoelastic = None;
+    rigid.effects.strain_stiffening = 0.0;
+    rigid.effects.adhesion_mj_per_m2 = 0.0;
     rigid
 }
 
@@ -571,6 +579,11 @@ pub fn run_demo_with(scenario: Scenario, options: &DemoOptions) -> Result<DemoRe
         ),
         None => "proximity calibration with the paper's u_s = h (--u-s-equals-h)".into(),
     });
+    if let Some(s) = sweep.load_scale {
+        notes.push(format!(
+            "load cell: reads {s:.4} of fem-core's rigid-sample load with its nominal scale; loads are divided by it"
+        ));
+    }
     let mut calibration = crate::calibration::CalibrationRecord::new("", "");
     calibration.set_proximity(&sweep);
     calibration.px_per_mm = Some(px.px_per_mm);

@@ -85,6 +85,21 @@ impl CalibrationRecord {
     }
 
     /// The proximity calibration at `p_air_kpa` (within 0.5 kPa).
+    /// The load cell's scale ([`super::SweepFit::load_scale`]) from the rigid-sample sweep
+    /// nearest to `p_air_kpa` (within 0.5 kPa, as [`Self::proximity_at`]); None when that
+    /// sweep has none (the cell is then read with its nominal scale).
+    pub fn load_scale_at(&self, p_air_kpa: f64) -> Option<f64> {
+        self.proximity_sweeps
+            .iter()
+            .filter(|s| (s.calibration.p_air_kpa - p_air_kpa).abs() <= 0.5)
+            .min_by(|a, b| {
+                (a.calibration.p_air_kpa - p_air_kpa)
+                    .abs()
+                    .total_cmp(&(b.calibration.p_air_kpa - p_air_kpa).abs())
+            })
+            .and_then(|s| s.load_scale)
+    }
+
     pub fn proximity_at(&self, p_air_kpa: f64) -> Option<&ProximityCalibration> {
         self.proximity
             .iter()

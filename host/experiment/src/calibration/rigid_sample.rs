@@ -24,6 +24,10 @@ pub struct RigidSampleCurve {
     /// stage 1): the proximity mirror moves with it, so a pressure error moves the reading.
     #[serde(default)]
     pub inflation_apex_mm: f64,
+    /// The normal load on the rigid sample at each `h_mm` (N; empty in curves stored before
+    /// it was kept): what the load cell should read, against which its scale is calibrated.
+    #[serde(default)]
+    pub load_n: Vec<f64>,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -66,7 +70,20 @@ impl RigidSampleCurve {
             h_mm: curve.points.iter().map(|p| p.h_mm).collect(),
             u_s_mm: curve.points.iter().map(|p| p.u_s_mm).collect(),
             inflation_apex_mm: curve.inflation_apex_mm,
+            load_n: curve.points.iter().map(|p| p.load_n).collect(),
         })
+    }
+
+    /// The load on the rigid sample at tube travel `h_mm` (piecewise linear between the
+    /// solved steps); None outside them or without loads.
+    pub fn load_n_at(&self, h_mm: f64) -> Option<f64> {
+        let n = self.h_mm.len();
+        if self.load_n.len() != n || n < 2 || h_mm < self.h_mm[0] || h_mm > self.h_mm[n - 1] {
+            return None;
+        }
+        let k = self.h_mm.partition_point(|&x| x <= h_mm).clamp(1, n - 1) - 1;
+        let t = (h_mm - self.h_mm[k]) / (self.h_mm[k + 1] - self.h_mm[k]);
+        Some(self.load_n[k] + t * (self.load_n[k + 1] - self.load_n[k]))
     }
 
     /// u_s at tube travel `h_mm` (piecewise linear between the solved steps; u_s = h
@@ -106,10 +123,13 @@ mod tests {
             h_mm: vec![0.0, 1.0, 2.0],
             u_s_mm: vec![0.0, 1.02, 2.04],
             inflation_apex_mm: 0.05,
+            load_n: vec![0.0, 0.4, 1.0],
         };
         assert_eq!(c.u_s_mm(-0.1), -0.1);
         assert!((c.u_s_mm(0.5) - 0.51).abs() < 1e-12);
         assert!((c.u_s_mm(1.5) - 1.53).abs() < 1e-12);
         assert!((c.u_s_mm(3.0) - 3.04).abs() < 1e-12);
+        assert!((c.load_n_at(1.5).unwrap_or(f64::NAN) - 0.7).abs() < 1e-12);
+        assert_eq!(c.load_n_at(2.5), None);
     }
 }

@@ -200,7 +200,7 @@ fn calibrate(args: &CalibrateArgs) -> Result<(CalibrationRecord, Vec<String>), (
                     .map_err(|e| fail(e.to_string()))?;
                 let c = fit.calibration;
                 lines.push(format!(
-                    "{p} kPa: U = {:.5} u^2 + {:.5} u + {:.5} V, residual {:.2} mV ({:.4} mm), contact at {:.4} mm; u_s differs from u_s = h by up to {:.4} mm ({:+.2} % at the deepest point) [{}]",
+                    "{p} kPa: U = {:.5} u^2 + {:.5} u + {:.5} V, residual {:.2} mV ({:.4} mm), contact at {:.4} mm; u_s differs from u_s = h by up to {:.4} mm ({:+.2} % at the deepest point) [{}]; {}",
                     c.a_v_per_mm2,
                     c.b_v_per_mm,
                     c.c_v,
@@ -209,7 +209,13 @@ fn calibrate(args: &CalibrateArgs) -> Result<(CalibrationRecord, Vec<String>), (
                     fit.contact_mm,
                     fit.u_s_difference_max_mm,
                     100.0 * fit.u_s_difference_at_max_relative,
-                    fit.rigid_u_s_source
+                    fit.rigid_u_s_source,
+                    match fit.load_scale {
+                        Some(s) => format!(
+                            "load cell reads {s:.4} of fem-core's rigid-sample load with its nominal scale (loads are divided by it)"
+                        ),
+                        None => "load cell scale not calibrated (no fem-core rigid-sample load)".into(),
+                    }
                 ));
                 r.set_proximity(&fit);
             }

@@ -106,7 +106,7 @@ pub fn run(args: DiagnoseArgs) -> ExitCode {
     let mut curves = Vec::new();
     for path in &args.curves {
         let curve = if path.is_dir() {
-            record_curve(path)
+            experiment::record_meta::record_curve_at_set_pressure(path).map_err(|e| e.to_string())
         } else {
             fit::curve_csv::read_curve_csv(path).map_err(|e| e.to_string())
         };
@@ -395,28 +395,4 @@ fn build_tables(dir: &Path, only: &[String]) -> ExitCode {
         }
     }
     ExitCode::SUCCESS
-}
-
-/// The curve of a record folder: its `curve.csv`, at the record's nominal pressure (the
-/// plan's set point from `meta.json`; the per-row manometer readings scatter around it).
-fn record_curve(dir: &Path) -> Result<fit::curve_csv::CurveCsv, String> {
-    use experiment::record_meta::{RecordMeta, RecordStatus};
-    let meta = RecordMeta::read(dir).map_err(|e| e.to_string())?;
-    if matches!(meta.status, RecordStatus::Running | RecordStatus::Failed(_)) {
-        return Err(format!(
-            "{}: the record's status is \"{}\": only complete or partial records have a curve to diagnose",
-            dir.display(),
-            String::from(meta.status)
-        ));
-    }
-    let mut curve =
-        fit::curve_csv::read_curve_csv(&dir.join("curve.csv")).map_err(|e| e.to_string())?;
-    for row in &mut curve.rows {
-        row.p_air_kpa = None;
-    }
-    curve.metadata.retain(|(k, _)| k != "p_air_kpa");
-    curve
-        .metadata
-        .push(("p_air_kpa".into(), format!("{}", meta.plan.pressure_kpa)));
-    Ok(curve)
 }

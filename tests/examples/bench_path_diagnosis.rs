@@ -1,0 +1,301 @@
+//! Hidden effects through the whole bench path, diagnosed from the records.
+//!
+//! For every effect of the diagnosis's library at its two test sizes
+//! (`diagnosis::simulate::sizes`) and for no effect, over several seeds: the hidden-effect
+//! truth of the diagnosis's studies (`diagnosis::simulate::truth_scenario`: the sample's
+//! mechanics solved by fem-core at its true parameters, hil-sim's effect code) runs as a
+//! hil-sim bench — the controller logic, the serial link, rendered camera frames, the
+//! calibrations, the vision and the pairing of `tactile demo` — at 6 and 15 kPa with 5
+//! indentations each; the two record folders are read as `tactile diagnose` reads them
+//! (`experiment::record_meta::record_curve_at_set_pressure`) and diagnosed with the shipped
+//! tables. Prints one line per case and a summary: how often each effect is named (first, or
+//! later in the forward selection) and how often clean data names something.
+//!
+//!     cargo run --release -p system-tests --example bench_path_diagnosis -- OUTDIR \
+//!         [--seeds N] [--null-seeds N] [--effects NAME,...] [--clear-only]
+//!
+//! Each case's result is kept in OUTDIR (`case-EFFECT-SIZE-SEED.json`, its records beside
+//! it), so an interrupted study carries on where it stopped. About a minute per case on
+//! two cores (two simulated bench runs, the diagnosis).
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+use diagnosis::candidates::EffectKind;
+use diagnosis::simulate::{Hidden, SimSpec, sizes, truth_modulus_kpa, truth_scenario};
+use diagnosis::{DiagnoseOptions, diagnose};
+use experiment::record_meta::record_curve_at_set_pressure;
+use experiment::simulated::{DemoOptions, run_demo_with};
+use serde::{Deserialize, Serialize};
+
+const PRESSURES_KPA: [f64; 2] = [6.0, 15.0];
+const REPEATS: u32 = 5;
+
+/// One case's outcome, as stored in OUTDIR.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+struct CaseResult {
+    effect: String,
+    size: f64,
+    seed: u64,
+    true_modulus_kpa: f64,
+    verdict: String,
+    /// Effects of the forward selection's final model, in order.
+    named: Vec<String>,
+    /// The first named effect's parameter (radius fit) and its joint fit, when named.
+    parameter: Option<f64>,
+    joint_parameter: Option<f64>,
+    /// The host's fit of both records together (the diagnosis's baseline) and the forward
+    /// selection's final model.
+    modulus_baseline_kpa: f64,
+    modulus_after_kpa: Option<f64>,
+    seconds: f64,
+}
+
+struct Args {
+    out: PathBuf,
+    seeds: u64,
+    null_seeds: u64,
+    effects: Vec<EffectKind>,
+    clear_only: bool,
+}
+
+fn parse_args() -> Result<Args, String> {
+    let mut it = std::env::args().skip(1);
+    let mut args = Args {
+        out: PathBuf::new(),
+        seeds: 2,
+        null_seeds: 4,
+        effects: EffectKind::ALL.to_vec(),
+        clear_only: false,
+    };
+    let number = |flag: &str, v: Option<String>| -> Result<u64, String> {
+        v.ok_or_else(|| format!("{flag} needs a number"))?
+            .parse()
+            .map_err(|e| format!("{flag}: {e}"))
+    };
+    let mut out = None;
+    while let Some(a) = it.next() {
+        match a.as_str() {
+            "--seeds" => args.seeds = number("--seeds", it.next())?,
+            "--null-seeds" => args.null_seeds = number("--null-seeds", it.next())?,
+            "--clear-only" => args.clear_only = true,
+            "--effects" => {
+                let list = it.next().ok_or("--effects needs a list of names")?;
+                args.effects = list
+                    .split(',')
+                    .map(|n| {
+                        EffectKind::ALL
+                            .into_iter()
+                            .find(|k| k.name() == n.trim())
+                            .ok_or_else(|| {
+                                format!(
+                                    "--effects: unknown effect {n:?} (known: {})",
+                                    EffectKind::ALL.map(EffectKind::name).join(", ")
+                                )
+                            })
+                    })
+                    .collect::<Result<_, _>>()?;
+            }
+            _ if a.starts_with('-') => return Err(format!("unknown option {a}")),
+            _ => out = Some(PathBuf::from(a)),
+        }
+    }
+    args.out = out.ok_or("usage: bench_path_diagnosis OUTDIR [--seeds N] [--null-seeds N] [--effects NAME,...] [--clear-only]")?;
+    Ok(args)
+}
+
+/// Runs one case: two bench runs, their records diagnosed.
+fn run_case(hidden: Option<Hidden>, seed: u64, dir: &Path) -> Result<CaseResult, String> {
+    let started = Instant::now();
+    let modulus = truth_modulus_kpa(hidden.map(|h| h.kind));
+    let spec = SimSpec {
+        modulus_kpa: modulus,
+        hidden,
+        seed,
+        ..SimSpec::default()
+    };
+    let scenario = truth_scenario(&spec);
+    let mut curves = Vec::new();
+    for p in PRESSURES_KPA {
+        let record = dir.join(format!("record-{p}"));
+        let _ = std::fs::remove_dir_all(&record);
+        let options = DemoOptions {
+            modulus_kpa: modulus,
+            pressure_kpa: p,
+            seed,
+            scenario: None,
+            out: Some(record.clone()),
+            lut: None,
+            repeats: REPEATS,
+            progress: false,
+            u_s_equals_h: false,
+            firmware: None,
+        };
+        run_demo_with(scenario.clone(), &options)
+            .map_err(|e| format!("bench run at {p} kPa: {e}"))?;
+        let curve = record_curve_at_set_pressure(&record).map_err(|e| e.to_string())?;
+        curves.push((record.display().to_string(), curve));
+    }
+    let points = diagnosis::data::points_from_curves(&curves).map_err(|e| e.to_string())?;
+    let (base, effects) = diagnosis::tables::shipped_tables().map_err(|e| e.to_string())?;
+    let options = DiagnoseOptions {
+        confidence_reruns: 0,
+        seed,
+        ..DiagnoseOptions::default()
+    };
+    let d = diagnose(&base, &effects, points, &options).map_err(|e| e.to_string())?;
+    let first_value = |v: &serde_json::Value| {
+        v.as_object()
+            .and_then(|m| m.values().next())
+            .and_then(|p| p.get("value"))
+            .and_then(serde_json::Value::as_f64)
+    };
+    Ok(CaseResult {
+        effect: hidden.map_or("none".into(), |h| h.kind.name().to_string()),
+        size: hidden.map_or(0.0, |h| h.size),
+        seed,
+        true_modulus_kpa: modulus,
+        verdict: d.verdict.as_str().to_string(),
+        named: d.effects.iter().map(|e| e.effect.clone()).collect(),
+        parameter: first_value(&d.parameters),
+        joint_parameter: d.joint_fit.as_ref().map(|j| j.value),
+        modulus_baseline_kpa: d.baseline.modulus_kpa,
+        modulus_after_kpa: (!d.effects.is_empty()).then_some(d.forward.modulus_after_kpa),
+        seconds: started.elapsed().as_secs_f64(),
+    })
+}
+
+fn main() -> ExitCode {
+    let args = match parse_args() {
+        Ok(a) => a,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    let mut cases: Vec<(Option<Hidden>, u64)> = (1..=args.null_seeds).map(|s| (None, s)).collect();
+    for &kind in &args.effects {
+        let [small, clear] = sizes(kind);
+        let wanted = if args.clear_only {
+            vec![clear]
+        } else {
+            vec![clear, small]
+        };
+        for size in wanted {
+            for seed in 1..=args.seeds {
+                cases.push((Some(Hidden { kind, size }), 100 + seed));
+            }
+        }
+    }
+    println!(
+        "effect               size     seed  verdict       named (forward)                          parameter (joint)      E2 before -> after [true]   s"
+    );
+    let mut results = Vec::new();
+    let mut failed = 0;
+    for (hidden, seed) in cases {
+        let name = hidden.map_or("none".to_string(), |h| {
+            format!("{}-{}", h.kind.name(), h.size)
+        });
+        let dir = args.out.join(format!("case-{name}-{seed}"));
+        let stored = dir.join("result.json");
+        let result = match std::fs::read(&stored)
+            .ok()
+            .and_then(|b| serde_json::from_slice::<CaseResult>(&b).ok())
+        {
+            Some(r) => Ok(r),
+            None => {
+                let _ = std::fs::create_dir_all(&dir);
+                let r = run_case(hidden, seed, &dir);
+                if let Ok(r) = &r
+                    && let Ok(text) = serde_json::to_vec_pretty(r)
+                    && let Err(e) = std::fs::write(&stored, text)
+                {
+                    eprintln!("warning: {}: {e}", stored.display());
+                }
+                r
+            }
+        };
+        match result {
+            Ok(r) => {
+                println!(
+                    "{:<20} {:<8} {:<5} {:<13} {:<40} {:<22} {:>6.1} -> {:>6} [{:.0}] {:>5.0}",
+                    r.effect,
+                    r.size,
+                    r.seed,
+                    r.verdict,
+                    if r.named.is_empty() {
+                        "-".to_string()
+                    } else {
+                        r.named.join(", ")
+                    },
+                    match (r.parameter, r.joint_parameter) {
+                        (Some(p), Some(j)) => format!("{p:.4} ({j:.4})"),
+                        (Some(p), None) => format!("{p:.4}"),
+                        _ => "-".into(),
+                    },
+                    r.modulus_baseline_kpa,
+                    r.modulus_after_kpa
+                        .map_or("-".to_string(), |m| format!("{m:.1}")),
+                    r.true_modulus_kpa,
+                    r.seconds
+                );
+                results.push(r);
+            }
+            Err(e) => {
+                failed += 1;
+                println!("{name} seed {seed}: FAILED: {e}");
+            }
+        }
+    }
+    summary(&results);
+    if failed > 0 {
+        eprintln!("{failed} case(s) failed to run");
+        return ExitCode::FAILURE;
+    }
+    ExitCode::SUCCESS
+}
+
+/// Per effect and size: named first / named at all; clean data: anything named.
+fn summary(results: &[CaseResult]) {
+    println!("summary:");
+    let nulls: Vec<&CaseResult> = results.iter().filter(|r| r.effect == "none").collect();
+    if !nulls.is_empty() {
+        let fp: Vec<String> = nulls
+            .iter()
+            .filter(|r| !r.named.is_empty())
+            .map(|r| format!("{} (seed {})", r.named.join("+"), r.seed))
+            .collect();
+        println!(
+            "  none: something named in {} of {} (target <= 5 %){}",
+            fp.len(),
+            nulls.len(),
+            if fp.is_empty() {
+                String::new()
+            } else {
+                format!(": {}", fp.join(", "))
+            }
+        );
+    }
+    let mut keys: Vec<(String, f64)> = results
+        .iter()
+        .filter(|r| r.effect != "none")
+        .map(|r| (r.effect.clone(), r.size))
+        .collect();
+    keys.dedup();
+    for (effect, size) in keys {
+        let of: Vec<&CaseResult> = results
+            .iter()
+            .filter(|r| r.effect == effect && r.size == size)
+            .collect();
+        let first = of
+            .iter()
+            .filter(|r| r.named.first() == Some(&effect))
+            .count();
+        let any = of.iter().filter(|r| r.named.contains(&effect)).count();
+        println!(
+            "  {effect} at {size}: named first in {first} of {n}, named at all in {any} of {n}",
+            n = of.len()
+        );
+    }
+}
