@@ -9,14 +9,19 @@
 //! indentations each; the two record folders are read as `tactile diagnose` reads them
 //! (`experiment::record_meta::record_curve_at_set_pressure`) and diagnosed with the shipped
 //! tables. Prints one line per case and a summary: how often each effect is named (first, or
-//! later in the forward selection) and how often clean data names something.
+//! later in the forward selection) and how often clean data names something. A proximity
+//! offset and a manometer offset present from the start are removed by the bench's own
+//! calibrations (the rigid sweep, the vent-open zero), so for them `none` is the expected
+//! verdict here; a case whose truth cannot be solved is listed as not run.
 //!
 //!     cargo run --release -p system-tests --example bench_path_diagnosis -- OUTDIR \
 //!         [--seeds N] [--null-seeds N] [--effects NAME,...] [--clear-only]
 //!
-//! Each case's result is kept in OUTDIR (`case-EFFECT-SIZE-SEED.json`, its records beside
-//! it), so an interrupted study carries on where it stopped. About a minute per case on
-//! two cores (two simulated bench runs, the diagnosis).
+//! Each case's two records are kept in OUTDIR (`case-EFFECT-SIZE-SEED/record-P`) and reused
+//! by later runs, so an interrupted study carries on where it stopped; the diagnosis is
+//! always recomputed from them (so a change of the diagnosis is measured on the same bench
+//! data in ~15 s per case). Delete OUTDIR after changing the bench path (hil-sim, the
+//! calibrations, vision, pairing). About a minute per case on two cores when the bench runs.
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -27,13 +32,13 @@ use diagnosis::simulate::{Hidden, SimSpec, sizes, truth_modulus_kpa, truth_scena
 use diagnosis::{DiagnoseOptions, diagnose};
 use experiment::record_meta::record_curve_at_set_pressure;
 use experiment::simulated::{DemoOptions, run_demo_with};
-use serde::{Deserialize, Serialize};
+use hil_sim::scenario::MechanicsSource;
 
 const PRESSURES_KPA: [f64; 2] = [6.0, 15.0];
 const REPEATS: u32 = 5;
 
-/// One case's outcome, as stored in OUTDIR.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+/// One case's outcome.
+#[derive(Debug, Clone)]
 struct CaseResult {
     effect: String,
     size: f64,
@@ -115,10 +120,25 @@ fn run_case(hidden: Option<Hidden>, seed: u64, dir: &Path) -> Result<CaseResult,
         seed,
         ..SimSpec::default()
     };
-    let scenario = truth_scenario(&spec);
+    let mut scenario = truth_scenario(&spec);
+    // The truth of a manometer offset assumes the controller regulates the offset reading
+    // (the sample then sits at p - p0); the bench's vent-open zero removes the offset
+    // first, so the sample sits at the set point: solve there too.
+    if let (Some(h), MechanicsSource::Solve { pressures_kpa, .. }) =
+        (hidden, &mut scenario.mechanics)
+        && h.kind == EffectKind::PressureOffset
+    {
+        pressures_kpa.extend(PRESSURES_KPA);
+        pressures_kpa.sort_by(f64::total_cmp);
+    }
     let mut curves = Vec::new();
     for p in PRESSURES_KPA {
         let record = dir.join(format!("record-{p}"));
+        // a complete record of an earlier run is reused
+        if let Ok(curve) = record_curve_at_set_pressure(&record) {
+            curves.push((record.display().to_string(), curve));
+            continue;
+        }
         let _ = std::fs::remove_dir_all(&record);
         let options = DemoOptions {
             modulus_kpa: modulus,
@@ -145,11 +165,11 @@ fn run_case(hidden: Option<Hidden>, seed: u64, dir: &Path) -> Result<CaseResult,
         ..DiagnoseOptions::default()
     };
     let d = diagnose(&base, &effects, points, &options).map_err(|e| e.to_string())?;
+    // the effect's own parameter (the map also holds derived values such as the thickness)
     let first_value = |v: &serde_json::Value| {
-        v.as_object()
-            .and_then(|m| m.values().next())
-            .and_then(|p| p.get("value"))
-            .and_then(serde_json::Value::as_f64)
+        v.as_object()?
+            .values()
+            .find_map(|p| p.get("value").and_then(serde_json::Value::as_f64))
     };
     Ok(CaseResult {
         effect: hidden.map_or("none".into(), |h| h.kind.name().to_string()),
@@ -198,25 +218,8 @@ fn main() -> ExitCode {
             format!("{}-{}", h.kind.name(), h.size)
         });
         let dir = args.out.join(format!("case-{name}-{seed}"));
-        let stored = dir.join("result.json");
-        let result = match std::fs::read(&stored)
-            .ok()
-            .and_then(|b| serde_json::from_slice::<CaseResult>(&b).ok())
-        {
-            Some(r) => Ok(r),
-            None => {
-                let _ = std::fs::create_dir_all(&dir);
-                let r = run_case(hidden, seed, &dir);
-                if let Ok(r) = &r
-                    && let Ok(text) = serde_json::to_vec_pretty(r)
-                    && let Err(e) = std::fs::write(&stored, text)
-                {
-                    eprintln!("warning: {}: {e}", stored.display());
-                }
-                r
-            }
-        };
-        match result {
+        let _ = std::fs::create_dir_all(&dir);
+        match run_case(hidden, seed, &dir) {
             Ok(r) => {
                 println!(
                     "{:<20} {:<8} {:<5} {:<13} {:<40} {:<22} {:>6.1} -> {:>6} [{:.0}] {:>5.0}",
@@ -244,14 +247,13 @@ fn main() -> ExitCode {
             }
             Err(e) => {
                 failed += 1;
-                println!("{name} seed {seed}: FAILED: {e}");
+                println!("{name} seed {seed}: not run: {e}");
             }
         }
     }
     summary(&results);
     if failed > 0 {
-        eprintln!("{failed} case(s) failed to run");
-        return ExitCode::FAILURE;
+        println!("  {failed} case(s) not run (above)");
     }
     ExitCode::SUCCESS
 }
@@ -293,8 +295,25 @@ fn summary(results: &[CaseResult]) {
             .filter(|r| r.named.first() == Some(&effect))
             .count();
         let any = of.iter().filter(|r| r.named.contains(&effect)).count();
+        // the bench's own calibrations remove these two instrument offsets: the rigid
+        // sweep sees the proximity offset, the vent-open zero the manometer's
+        let calibrated_out = match effect.as_str() {
+            "displacement_offset" => {
+                " (removed by the rigid-sample proximity calibration: none expected)"
+            }
+            "pressure_offset" => " (removed by the manometer's vent-open zero: none expected)",
+            _ => "",
+        };
+        let worst_e2 = of
+            .iter()
+            .map(|r| {
+                100.0
+                    * (r.modulus_after_kpa.unwrap_or(r.modulus_baseline_kpa) / r.true_modulus_kpa
+                        - 1.0)
+            })
+            .fold(0.0, |m: f64, v| if v.abs() > m.abs() { v } else { m });
         println!(
-            "  {effect} at {size}: named first in {first} of {n}, named at all in {any} of {n}",
+            "  {effect} at {size}: named first in {first} of {n}, named at all in {any} of {n}; E2 of the final model off by up to {worst_e2:+.1} %{calibrated_out}",
             n = of.len()
         );
     }

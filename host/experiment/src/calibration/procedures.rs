@@ -244,13 +244,19 @@ pub struct SweepFit {
 /// is small and the contact position's uncertainty a large share of it.
 pub const LOAD_SCALE_FROM_MM: f64 = 0.3;
 
+/// Load-cell scales accepted (reading over load): a real cell is within a few per cent of
+/// its nominal scale, so a value outside means the sweep was not on a rigid sample (or the
+/// cell is broken) and is not applied.
+pub const LOAD_SCALE_RANGE: std::ops::RangeInclusive<f64> = 0.8..=1.25;
+
 /// The load cell's scale from a rigid-sample sweep: the readings L_i (nominal scale) beyond
 /// [`LOAD_SCALE_FROM_MM`] of travel past `contact_mm` against fem-core's load P(h) on the
 /// rigid sample, L = s P(h - d) with a small travel shift d (the contact position's error
 /// and the load cell's conversion lag), fitted by linear least squares in the linearisation
 /// L = s P(h) - (s d) P'(h). A real cell differs from its nominal scale by a few per cent;
 /// the result rests on fem-core's rigid-sample load, which the verification puts within
-/// 0.2 % of an independent code on the production mesh.
+/// 0.2 % of an independent code on the production mesh. None outside
+/// [`LOAD_SCALE_RANGE`].
 pub fn load_scale_of(data: &SweepData, contact_mm: f64, rigid: &RigidSampleCurve) -> Option<f64> {
     const DH: f64 = 0.01;
     let (mut spp, mut spd, mut sdd, mut spl, mut sdl) = (0.0, 0.0, 0.0, 0.0, 0.0);
@@ -282,7 +288,7 @@ pub fn load_scale_of(data: &SweepData, contact_mm: f64, rigid: &RigidSampleCurve
         return None;
     }
     let s = (spl * sdd - sdl * spd) / det;
-    (s.is_finite() && s > 0.0).then_some(s)
+    (s.is_finite() && LOAD_SCALE_RANGE.contains(&s)).then_some(s)
 }
 
 /// Contact and parabola fits of a sweep (see the module docs).
@@ -460,5 +466,7 @@ mod tests {
         assert_eq!(load_scale_of(&sweep(0.97, 1.0, 0.0), 1.0, &r), None);
         // contact beyond the sweep's end: no point far enough past it
         assert_eq!(load_scale_of(&sweep(0.97, 1.0, 0.0), 3.0, &rigid()), None);
+        // a sweep that reads half the rigid load was not on a rigid sample: not applied
+        assert_eq!(load_scale_of(&sweep(0.5, 1.0, 0.0), 1.0, &rigid()), None);
     }
 }

@@ -214,7 +214,7 @@ fn calibrate(args: &CalibrateArgs) -> Result<(CalibrationRecord, Vec<String>), (
                         Some(s) => format!(
                             "load cell reads {s:.4} of fem-core's rigid-sample load with its nominal scale (loads are divided by it)"
                         ),
-                        None => "load cell scale not calibrated (no fem-core rigid-sample load)".into(),
+                        None => "load cell scale not calibrated (no fem-core rigid-sample load, or the cell read outside 0.8..1.25 of it: was the sample rigid?)".into(),
                     }
                 ));
                 r.set_proximity(&fit);
