@@ -54,7 +54,7 @@ pub struct JointWhitener {
 
 /// Largest correlation the cross terms may give the two channels (white: at one point;
 /// offsets: of the constant per-test offsets).
-const MAX_WHITE_CORRELATION: f64 = 0.95;
+const MAX_CROSS_CORRELATION: f64 = 0.95;
 
 /// What the two channels share at the points `idx` of one pressure (module notes):
 /// (sigma_x^2, the white u_s variance in mm^2, and c, the per-test offsets' covariance in
@@ -142,7 +142,7 @@ impl JointWhitener {
             shared_white_u_mm.push((p, var_x.sqrt()));
             let c_offset = c_offset.clamp(
                 0.0,
-                MAX_WHITE_CORRELATION * radius.test_offset_mm(p) * load.test_offset_mm(p),
+                MAX_CROSS_CORRELATION * radius.test_offset_mm(p) * load.test_offset_mm(p),
             );
             let mut c = vec![0.0; m * m];
             for a in 0..n {
@@ -163,7 +163,7 @@ impl JointWhitener {
                     }
                     let mut cap = c_offset;
                     if i == j {
-                        let limit = MAX_WHITE_CORRELATION
+                        let limit = MAX_CROSS_CORRELATION
                             * (radius.white_variance(points, i) * load.white_variance(points, i))
                                 .sqrt();
                         let x = var_x * radius.slope_at(i) * load.slope_at(i);
