@@ -45,6 +45,13 @@ pub struct NewtonSettings {
     /// The contact tangent includes the master surface's curvature (exact Newton; copied
     /// to every `ContactPair::gap_curvature_tangent` when a solve starts).
     pub contact_curvature_tangent: bool,
+    /// Give up (the caller cuts the step) after this many residuals in a row that are
+    /// already below `1e-3` of the reference force but each less than halved: an inexact
+    /// tangent that has stopped contracting near the solution. `usize::MAX` disables it.
+    pub stagnation_limit: usize,
+    /// The load step's predictor extrapolates the contact multipliers along the same secant
+    /// as the displacements (see `Indentation::solve_step`).
+    pub predict_multipliers: bool,
 }
 
 impl Default for NewtonSettings {
@@ -59,6 +66,8 @@ impl Default for NewtonSettings {
             chord_contraction: 0.1,
             chord_below: 1e-2,
             contact_curvature_tangent: true,
+            stagnation_limit: usize::MAX,
+            predict_multipliers: false,
         }
     }
 }
@@ -627,6 +636,9 @@ impl Model {
         let mut chords = 0;
         let chord_limit = self.newton.max_chord_iterations;
         let mut try_chord = chord_limit > 0 && continuing;
+        // residuals in a row near the solution that were not halved (see stagnation_limit)
+        let mut stagnant = 0;
+        let mut previous_norm = f64::INFINITY;
         while it < self.newton.max_iterations {
             let chord =
                 try_chord && chords < chord_limit && self.solver.has_factor(self.n_equations);
@@ -680,7 +692,15 @@ impl Model {
                 self.newton_iterations += done;
                 return Ok(done);
             }
-            if it > self.newton.stall_iterations && norm > 1e-4 * reference {
+            stagnant = if norm < 1e-3 * reference && norm > 0.5 * previous_norm {
+                stagnant + 1
+            } else {
+                0
+            };
+            previous_norm = norm;
+            if (it > self.newton.stall_iterations && norm > 1e-4 * reference)
+                || stagnant >= self.newton.stagnation_limit
+            {
                 self.newton_iterations += it;
                 return Err(NewtonFailure::NotConverged {
                     residual: norm,

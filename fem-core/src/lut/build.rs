@@ -89,9 +89,14 @@ pub fn build_fem_lut(
                 Ok::<_, crate::FemError>(solution.curve)
             };
             let base = simulation(&grid.curve_params(0));
+            let newton = &base.nonlinear_solver;
             let description = format!(
-                "{FEM_CORE_SOLVER} with {:?}, {}; {}",
+                "{FEM_CORE_SOLVER} with {:?}, Newton relative tolerance {:e}, stagnation \
+                 limit {}, multiplier predictor {}, {}; {}",
                 base.solver_settings(),
+                newton.relative_tolerance,
+                newton.stagnation_limit,
+                newton.predict_multipliers,
                 linear_solvers_of(grid, simulation),
                 crate::problem::OUTPUT_DEFINITIONS
             );
