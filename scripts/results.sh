@@ -30,7 +30,7 @@ sections=(
     "fem-verification@@@@cargo test -q -p fem-core --release -- --include-ignored --nocapture --test-threads=1"
     "convergence@@@@RAYON_NUM_THREADS=1 cargo run -q --release -p fem-core --example convergence_study -- 1e7 6 1,2,4,8 0"
     "fem-error-by-level@@@@RAYON_NUM_THREADS=1 cargo run -q --release -p fem-core --example discretisation_error"
-    "edge-band@@^(E2|edge band|production - band)@@for c in '1e7 6' '200 6' '1000 15'; do RAYON_NUM_THREADS=1 cargo run -q --release -p fem-core --example edge_band_curve -- \$c 1.7 34; done"
+    "edge-band@@^(E2|edge band|production - band)@@for c in '1e7 6' '200 6' '37 6' '1000 15'; do RAYON_NUM_THREADS=1 cargo run -q --release -p fem-core --example edge_band_curve -- \$c 1.7 34; done"
     "converged-truth@@@@scripts/converged_truth_fit.sh"
     "interpolation@@^(fem-core|p_air)@@for t in default default-fine; do cargo run -q --release -p fem-core --example interpolation_error -- fem-core/data/\$t.lut 6,15; done"
     "snap-through@@^(E2|snap|solve time)@@for e in 681.3 1000; do echo \"E2 = \$e kPa, p_air = 0:\"; RAYON_NUM_THREADS=1 cargo run -q --release -p fem-core --example curve -- \$e 0 0 40 2; done"

@@ -240,6 +240,9 @@ impl SolverSettings {
     }
 }
 
+/// Newton iterations allowed for the re-equilibration after a move of the edge band.
+const BAND_MOVE_ITERATIONS: usize = 60;
+
 /// Thickest sample accepted: the half-space verification problems (Hertz, Sneddon, in
 /// `tests/indentation.rs`) run at this thickness; a thicker sample indents as that
 /// half-space at the depths the sensor reaches, and the graded mesh is not built for it.
@@ -1226,7 +1229,6 @@ pub(crate) fn solve_stages(
     // solution is replaced by the exact one for the rest of that increment (and back for
     // the next: on stiff samples the inexact one is the faster, and stagnates only now and
     // then; on soft ones at low pressure it stagnates often, e.g. 37 kPa at 6 kPa)
-    let exact_tangent = std::cell::Cell::new(false);
     let base_tangent = ind.model.newton.contact_curvature_tangent;
     for c in &mut ind.model.contacts {
         c.unsymmetric_friction = unsymmetric_friction;
@@ -1244,6 +1246,8 @@ pub(crate) fn solve_stages(
     for k in 1..=params.steps {
         let h_from = dh * (k - 1) as f64;
         let h_to = dh * k as f64;
+        // each increment (and a band move before it) starts with the configured tangent
+        ind.model.newton.contact_curvature_tangent = base_tangent;
         // move the band ahead of an edge about to leave it: a new mesh, the state carried
         // over and re-equilibrated at the present travel; if that fails the old mesh goes
         // on (its band still holds the edge for a while) and the move is tried again at the
@@ -1254,13 +1258,33 @@ pub(crate) fn solve_stages(
                 let moved_to = b.extent(predicted);
                 let mut next = settings.with_band(b, moved_to);
                 next.mesh.edge_window = Some(ind.band_over(&state, moved_to, b));
-                let mut moved = Indentation::build(params, &next, Some(top_z_mm));
-                tune(&mut moved.model.newton);
-                moved.model.newton.contact_curvature_tangent |= exact_tangent.get();
-                // one solve without cutting: Newton gets its full iteration budget
-                moved.model.newton.stall_iterations = usize::MAX;
-                let mut moved_state = moved.take_over(&mut ind, &state, h_from);
-                match moved.solve_step(&mut moved_state, h_from, params.pressure_kpa, &next) {
+                // one solve without cutting, with twice Newton's usual iteration budget: a
+                // transferred state starts far from the new mesh's contact equilibrium and
+                // Newton may wander before it converges (215 kPa at 10 kPa: three moves at
+                // h = 1.7-1.8 mm ran out of 30 iterations and the curve stopped at 1.8 mm;
+                // with 60 they converge and the curve completes); if it fails with the
+                // configured contact tangent, once more with the other one
+                let attempt_move = |ind: &mut Indentation, tangent: bool| {
+                    let mut moved = Indentation::build(params, &next, Some(top_z_mm));
+                    tune(&mut moved.model.newton);
+                    moved.model.newton.stall_iterations = usize::MAX;
+                    moved.model.newton.contact_curvature_tangent = tangent;
+                    let usual_iterations = moved.model.newton.max_iterations;
+                    moved.model.newton.max_iterations = BAND_MOVE_ITERATIONS;
+                    let mut moved_state = moved.take_over(ind, &state, h_from);
+                    let result =
+                        moved.solve_step(&mut moved_state, h_from, params.pressure_kpa, &next);
+                    moved.model.newton.max_iterations = usual_iterations;
+                    moved.model.newton.contact_curvature_tangent = base_tangent;
+                    (moved, moved_state, result)
+                };
+                let (mut moved, mut moved_state, mut result) = attempt_move(&mut ind, base_tangent);
+                if result.is_err() {
+                    ind.attempts = std::mem::take(&mut moved.attempts);
+                    ind.snap_through_path = std::mem::take(&mut moved.snap_through_path);
+                    (moved, moved_state, result) = attempt_move(&mut ind, !base_tangent);
+                }
+                match result {
                     Ok(()) => {
                         ind = moved;
                         state = moved_state;
@@ -1291,9 +1315,6 @@ pub(crate) fn solve_stages(
                 }
             }
         }
-        // each increment starts with the configured tangent
-        exact_tangent.set(false);
-        ind.model.newton.contact_curvature_tangent = base_tangent;
         let saved: Vec<Vec<f64>> = ind
             .model
             .contacts
@@ -1329,7 +1350,6 @@ pub(crate) fn solve_stages(
                     && !ind.model.newton.contact_curvature_tangent
                 {
                     ind.model.newton.contact_curvature_tangent = true;
-                    exact_tangent.set(true);
                 }
                 result
             },
