@@ -288,6 +288,7 @@ impl DeviceThread {
             tap.units = Some(*link.units());
             tap.manometer_zero_kpa = zero;
             tap.proximity = None;
+            tap.load_scale = None;
             tap.capture = None;
         }
         link.start_stream(self.config.idle_stream_hz, ChannelSet::ALL)

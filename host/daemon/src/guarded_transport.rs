@@ -64,6 +64,10 @@ pub struct TapContext {
     pub units: Option<SampleUnits>,
     pub proximity: Option<ProximityCalibration>,
     pub manometer_zero_kpa: f64,
+    /// The load cell's scale against its nominal counts/N, from the rigid-sample sweep at
+    /// the running experiment's pressure (`CalibrationRecord::load_scale_at`); `None`:
+    /// loads at the nominal scale (no experiment running, or a calibration without it).
+    pub load_scale: Option<f64>,
     /// Raw samples kept for the running experiment (taken by its radius source).
     pub capture: Option<Vec<Sample>>,
 }
@@ -380,7 +384,10 @@ pub fn sample_event(ctx: &TapContext, s: &Sample, n: u32, received_unix_us: u64)
             .zip(s.manometer_counts)
             .map(|(u, c)| u.manometer_kpa(c) - ctx.manometer_zero_kpa),
         stage_mm: units.zip(s.stage_steps).map(|(u, c)| u.stage_mm(c)),
-        load_n: units.zip(s.load_counts).map(|(u, c)| u.load_n(c)),
+        // the same conversion as the experiment's record (`indentation::SampleCalibration`)
+        load_n: units
+            .zip(s.load_counts)
+            .map(|(u, c)| u.load_n(c) / ctx.load_scale.unwrap_or(1.0)),
         u_s_mm,
         status: s.status.0,
     }
@@ -577,5 +584,44 @@ mod tests {
         assert!((8..=10).contains(&events), "{events} events");
         assert_eq!(switch.blocks_lost.load(Ordering::Relaxed), 1);
         assert_eq!(switch.samples_seen.load(Ordering::Relaxed), 24 * 8);
+    }
+
+    /// The live feed's load is the calibrated one while an experiment runs (the cell read
+    /// 0.97 of its nominal counts/N on the rigid sample: 97 counts are 1 N, as in the
+    /// record), the nominal one otherwise.
+    #[test]
+    fn live_loads_use_the_calibrated_load_scale() {
+        let info = protocol::DeviceInfo {
+            protocol_version: 1,
+            firmware_version: Default::default(),
+            serial: Default::default(),
+            adc_full_scale_counts: 65535,
+            adc_vref_mv: 3300,
+            manometer_zero_counts: 0,
+            manometer_kpa_per_count: 0.01,
+            load_counts_per_n: 100.0,
+            load_rate_sps: 80,
+            stage_steps_per_mm: 100.0,
+            overpressure_limit_kpa: 40.0,
+            heartbeat_timeout_ms: 500,
+            control_period_us: 1000,
+        };
+        let sample = Sample {
+            load_counts: Some(97),
+            ..Sample::default()
+        };
+        let mut ctx = TapContext {
+            units: Some(SampleUnits::new(&info)),
+            ..TapContext::default()
+        };
+        let load = |ctx: &TapContext| match sample_event(ctx, &sample, 1, 0) {
+            Event::Sample { load_n, .. } => load_n,
+            other => panic!("expected a sample event, got {other:?}"),
+        };
+        let nominal = load(&ctx).unwrap();
+        assert!((nominal - 0.97).abs() < 1e-12, "{nominal}");
+        ctx.load_scale = Some(0.97);
+        let calibrated = load(&ctx).unwrap();
+        assert!((calibrated - 1.0).abs() < 1e-12, "{calibrated}");
     }
 }

@@ -234,6 +234,7 @@ impl JobRun<'_> {
         if let Ok(mut tap) = switch.tap.lock() {
             tap.proximity = Some(*proximity);
             tap.manometer_zero_kpa = calibration.manometer_zero_kpa;
+            tap.load_scale = calibration.load_scale_at(plan.pressure_kpa);
             tap.capture = Some(Vec::new());
         }
         let shared = Arc::clone(&dt.shared);
@@ -289,6 +290,7 @@ impl JobRun<'_> {
         );
         if let Ok(mut tap) = switch.tap.lock() {
             tap.proximity = None;
+            tap.load_scale = None;
             tap.capture = None;
         }
         outcome
