@@ -35,7 +35,7 @@ sections=(
     "interpolation@@^(fem-core|p_air)@@for t in default default-fine; do cargo run -q --release -p fem-core --example interpolation_error -- fem-core/data/\$t.lut 6,15; done"
     "snap-through@@^(E2|snap|solve time)@@for e in 681.3 1000; do echo \"E2 = \$e kPa, p_air = 0:\"; RAYON_NUM_THREADS=1 cargo run -q --release -p fem-core --example curve -- \$e 0 0 40 2; done"
     "fem-speed@@^(stage|curve solve)@@RAYON_NUM_THREADS=1 cargo run -q --release -p fem-core --example solver_trace -- 200 6 0"
-    "diagnosis@@^[^ ]@@cargo test -q --release -p system-tests --test diagnose_hidden_effects -- --ignored --nocapture --test-threads=1 && cargo test -q --release -p system-tests --test diagnose_null -- --ignored --nocapture && cargo test -q --release -p system-tests --test diagnose_table_error -- --ignored --nocapture --test-threads=1"
+    "diagnosis@@^[^ ]@@cargo test -q --release -p system-tests --test diagnose_hidden_effects every_effect_at_a_clear_size -- --ignored --nocapture --test-threads=1 && cargo test -q --release -p system-tests --test diagnose_null -- --ignored --nocapture --test-threads=1 && cargo test -q --release -p system-tests --test diagnose_table_error -- --ignored --nocapture --test-threads=1"
     "diagnosis-bench-path@@@@cargo run -q --release -p system-tests --example bench_path_diagnosis -- target/bench-path-study --seeds 2 --null-seeds 6"
     "model-file@@^(plain fit|true )@@cargo test -q --release -p tactile --test diagnose_cli an_applied_diagnosis -- --nocapture && cargo test -q --release -p system-tests --test daemon_model -- --nocapture"
     "firmware-size@@@@(cd firmware/rp2040 && cargo build -q --release) && scripts/check-firmware-size.sh"
