@@ -1,7 +1,7 @@
 //! Trace the Newton work of one curve: per stage-2 step attempt the residual histories of
 //! its Newton solves (first solve, then one per contact augmentation), and the totals.
 //! `cargo run -p fem-core --release --example solver_trace -- [modulus_kpa] [pressure_kpa]
-//! [mesh_level] [friction]`; `FEM_CHORD=0` disables the chord iterations (full Newton
+//! [mesh_level] [friction] [steps] [depth_mm]`; `FEM_CHORD=0` disables the chord iterations (full Newton
 //! only), `FEM_CHORD=N,Q` allows N of them per solve with contraction Q; `FEM_EDGE_BAND=1`
 //! solves with the band of fine elements at the contact edge, `FEM_CONTACT_CURVATURE=0|1`
 //! leaves out or includes the master surface's curvature in the contact tangent.
@@ -17,6 +17,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         pressure_kpa: get(1, 6.0),
         mesh_level: get(2, 0.0) as i32,
         friction: get(3, 0.0),
+        steps: get(4, 40.0) as usize,
+        max_depth_mm: get(5, 2.0),
         ..Default::default()
     };
     let mut sim = fem_core::Simulation::new(&params);
@@ -37,6 +39,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     let started = std::time::Instant::now();
     let solution = sim.solve()?;
+    if let fem_core::StopReason::Stopped { error, .. } = &solution.stop {
+        println!("stopped: {error}");
+    }
     let (curve, ind) = (solution.curve, solution.indentation);
     let seconds = started.elapsed().as_secs_f64();
     let verbose = std::env::var_os("FEM_TRACE_QUIET").is_none();

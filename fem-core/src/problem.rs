@@ -690,8 +690,12 @@ impl Indentation {
     /// travel h is an unknown ([`Model::solve_equilibrium_bordered`]): u_s increases in
     /// steps of `SNAP_US_STEP_MM` (halved on failure) until the path's h reaches `h_to`
     /// again; then the equilibrium at `h_to` on that branch is solved under the usual
-    /// travel control. The path's points are appended to `snap_through_path`; returns the
+    /// travel control. Where u_s itself turns back (a snap-back of the apex as well: no
+    /// equilibrium with a slightly larger u_s, so the apex-controlled steps fail however
+    /// small), the path goes on by arc length ([`Self::trace_by_arc_length`]) if
+    /// `by_arc_length`. The path's points are appended to `snap_through_path`; returns the
     /// state at `h_to`.
+    #[allow(clippy::too_many_arguments)] // the path's ends, the stage's settings, the mode
     fn trace_snap_through(
         &mut self,
         u: &[f64],
@@ -700,6 +704,7 @@ impl Indentation {
         p_kpa: f64,
         settings: &SolverSettings,
         apex_z0_mm: f64,
+        by_arc_length: bool,
     ) -> Result<Vec<f64>, NewtonFailure> {
         let apex_dof = 2 * self.shell.inner_apex + 1;
         let load_dofs: Vec<(usize, f64)> = self.clamp_z_dofs.iter().map(|&d| (d, -1.0)).collect();
@@ -710,6 +715,8 @@ impl Indentation {
         let u_s_start = u_s;
         let mut step = SNAP_US_STEP_MM;
         let mut path = Vec::new();
+        // the last two converged states of the path (its secant is the arc-length tangent)
+        let mut before = (state.clone(), h);
         while h < h_to {
             if u_s - u_s_start > SNAP_US_MAX_MM {
                 return Err(NewtonFailure::NotConverged {
@@ -737,7 +744,7 @@ impl Indentation {
             );
             match solved {
                 Ok(()) => {
-                    state = trial;
+                    before = (std::mem::replace(&mut state, trial), h);
                     h = h_trial;
                     u_s = target;
                     path.push(self.curve_point(&state, h, apex_z0_mm));
@@ -749,7 +756,20 @@ impl Indentation {
                     }
                     step *= 0.5;
                     if step < SNAP_US_STEP_MM / 64.0 {
-                        return Err(e);
+                        if path.is_empty() || !by_arc_length {
+                            return Err(e);
+                        }
+                        let (far, h_far) = self.trace_by_arc_length(
+                            (&before.0, before.1),
+                            (&state, h),
+                            h_to,
+                            p_kpa,
+                            settings,
+                            apex_z0_mm,
+                            &mut path,
+                        )?;
+                        // h_far >= h_to: the loop ends
+                        (state, h) = (far, h_far);
                     }
                 }
             }
@@ -762,6 +782,135 @@ impl Indentation {
         self.snap_through_path.extend(path);
         self.new_branch = true;
         Ok(landing)
+    }
+
+    /// Follow the equilibrium path by arc length from the converged state `last`, whose
+    /// predecessor on the path is `before`, until the travel reaches `h_to`: each step
+    /// solves for the state and the travel h on the plane normal to the path's secant
+    /// (Riks' normal-plane constraint, linearised: t . (u - u_k) + t_h (h - h_k) = ds with
+    /// the unit secant (t, t_h) over the free dofs and h; Crisfield, "Non-linear Finite
+    /// Element Analysis of Solids and Structures", vol. 1, sec. 9.3), from the secant's
+    /// extrapolation. Neither h nor u_s needs to increase along the way, so the path passes
+    /// turning points of both. ds starts at the secant's length, is rescaled after each
+    /// converged step towards an apex or tube movement of [`ARC_MOVE_MM`] and halves on
+    /// failure or on a jump ([`ARC_JUMP`]; at most [`ARC_MAX_CUTS`] times in a row). Appends the path's points to `path`; returns the state and travel at the
+    /// first point past `h_to`.
+    #[allow(clippy::too_many_arguments)] // the path's two ends and the stage's settings
+    fn trace_by_arc_length(
+        &mut self,
+        before: (&[f64], f64),
+        last: (&[f64], f64),
+        h_to: f64,
+        p_kpa: f64,
+        settings: &SolverSettings,
+        apex_z0_mm: f64,
+        path: &mut Vec<CurvePoint>,
+    ) -> Result<(Vec<f64>, f64), NewtonFailure> {
+        let apex_dof = 2 * self.shell.inner_apex + 1;
+        let load_dofs: Vec<(usize, f64)> = self.clamp_z_dofs.iter().map(|&d| (d, -1.0)).collect();
+        let free: Vec<usize> = (0..last.0.len())
+            .filter(|&d| self.model.is_free(d))
+            .collect();
+        let secant = |a: (&[f64], f64), b: (&[f64], f64)| -> (Vec<(usize, f64)>, f64, f64) {
+            let du: Vec<(usize, f64)> = free.iter().map(|&d| (d, b.0[d] - a.0[d])).collect();
+            let dh = b.1 - a.1;
+            let length = (du.iter().map(|(_, x)| x * x).sum::<f64>() + dh * dh).sqrt();
+            (du, dh, length)
+        };
+        let (_, _, first_length) = secant(before, last);
+        if !(first_length > 0.0 && first_length.is_finite()) {
+            return Err(NewtonFailure::NotConverged {
+                residual: f64::NAN,
+                reference: f64::NAN,
+            });
+        }
+        let (mut prev, mut prev_h) = (before.0.to_vec(), before.1);
+        let (mut state, mut h) = (last.0.to_vec(), last.1);
+        let u_s_start = h + state[apex_dof] - apex_z0_mm;
+        let mut ds = first_length;
+        let mut failures = 0;
+        for _ in 0..ARC_MAX_STEPS {
+            if h >= h_to {
+                return Ok((state, h));
+            }
+            if h + state[apex_dof] - apex_z0_mm - u_s_start > SNAP_US_MAX_MM {
+                break;
+            }
+            let (du, dh, length) = secant((&prev, prev_h), (&state, h));
+            let t: Vec<(usize, f64)> = du.iter().map(|&(d, x)| (d, x / length)).collect();
+            let t_h = dh / length;
+            let target = t.iter().map(|&(d, w)| w * state[d]).sum::<f64>() + t_h * h + ds;
+            let saved: Vec<Vec<f64>> = self
+                .model
+                .contacts
+                .iter()
+                .map(|c| c.multipliers.clone())
+                .collect();
+            let mut trial = state.clone();
+            for &(d, w) in &t {
+                trial[d] += ds * w;
+            }
+            let mut h_trial = h + ds * t_h;
+            let solved = self
+                .model
+                .solve_equilibrium_bordered(
+                    &mut trial,
+                    p_kpa,
+                    &mut h_trial,
+                    &load_dofs,
+                    &t,
+                    t_h,
+                    target,
+                )
+                .and_then(|_| {
+                    self.augment_contact(&mut trial, settings, &mut |ind, u| {
+                        ind.model
+                            .solve_equilibrium_bordered(
+                                u,
+                                p_kpa,
+                                &mut h_trial,
+                                &load_dofs,
+                                &t,
+                                t_h,
+                                target,
+                            )
+                            .map(|_| ())
+                    })
+                });
+            // a step that moves the apex or the tube much further than aimed at may have
+            // jumped to another branch (the path bends sharply near the snap): taken back
+            let u_s_now = h + state[apex_dof] - apex_z0_mm;
+            let moved = (h_trial + trial[apex_dof] - apex_z0_mm - u_s_now)
+                .abs()
+                .max((h_trial - h).abs());
+            let jumped = moved > ARC_JUMP * ARC_MOVE_MM;
+            match solved {
+                Ok(()) if !jumped => {
+                    prev = std::mem::replace(&mut state, trial);
+                    prev_h = std::mem::replace(&mut h, h_trial);
+                    path.push(self.curve_point(&state, h, apex_z0_mm));
+                    failures = 0;
+                    ds *= (ARC_MOVE_MM / moved.max(1e-12)).clamp(0.5, 2.0);
+                }
+                result => {
+                    for (c, m) in self.model.contacts.iter_mut().zip(saved) {
+                        c.multipliers = m;
+                    }
+                    failures += 1;
+                    ds *= 0.5;
+                    if failures > ARC_MAX_CUTS {
+                        return Err(result.err().unwrap_or(NewtonFailure::NotConverged {
+                            residual: f64::NAN,
+                            reference: f64::NAN,
+                        }));
+                    }
+                }
+            }
+        }
+        Err(NewtonFailure::NotConverged {
+            residual: f64::NAN,
+            reference: f64::NAN,
+        })
     }
 
     /// One step of the apex-controlled path: the bordered Newton solve, then Uzawa
@@ -1056,6 +1205,21 @@ const SNAP_US_STEP_MM: f64 = 0.01;
 /// step's end (the shell's apex cannot move further than its own height).
 const SNAP_US_MAX_MM: f64 = 3.0;
 
+/// What one step of [`Indentation::trace_by_arc_length`] aims to move the apex or the
+/// tube by (the larger of the two): the arc length is rescaled by the ratio after each
+/// step (by 1/2 to 2), so the path's points are about as dense as the apex-controlled
+/// path's (`SNAP_US_STEP_MM`), whatever the mesh's number of dofs.
+const ARC_MOVE_MM: f64 = 0.02;
+/// The arc-length path gives up after this many steps without the travel reaching the
+/// step's end.
+const ARC_MAX_STEPS: usize = 150;
+/// A step of the arc-length path that moves the apex or the tube by more than this many
+/// times [`ARC_MOVE_MM`] is taken back and halved (170 kPa at 4 kPa, mesh level -2: a step
+/// aimed at 0.02 mm landed 0.14 mm away in u_s, back on the stable branch).
+const ARC_JUMP: f64 = 2.5;
+/// Halvings of the arc length in a row after which the path gives up.
+const ARC_MAX_CUTS: usize = 8;
+
 /// Consecutive step cuts after which stalled Newton iterations are no longer abandoned early.
 const STALL_CUTS: u32 = 2;
 
@@ -1081,7 +1245,7 @@ fn continuation(
     mut solve: impl FnMut(f64, &mut Vec<f64>, u32) -> Result<(), NewtonFailure>,
     mut on_failure_restore: impl FnMut(),
     mut on_success_commit: impl FnMut(&[f64], &[f64]),
-    mut past_limit_point: impl FnMut(f64, f64, &[f64]) -> Option<Vec<f64>>,
+    mut past_limit_point: impl FnMut(f64, f64, &[f64], bool) -> Option<Vec<f64>>,
     stage: &'static str,
     unit: &'static str,
 ) -> Result<Stepping, FemError> {
@@ -1092,6 +1256,7 @@ fn continuation(
         cut: false,
     };
     let mut cuts = 0;
+    let start_state = state.clone();
     while done < to - 1e-12 * to.abs().max(1.0) {
         let target = (done + step).min(to);
         let mut trial = state.clone();
@@ -1116,7 +1281,7 @@ fn continuation(
                 if cuts > max_cuts && target < to {
                     // no equilibrium reachable by small steps (a limit point: the shell
                     // snaps through): follow the path past it to the increment's end
-                    if let Some(trial) = past_limit_point(done, to, state) {
+                    if let Some(trial) = past_limit_point(done, to, state, false) {
                         on_success_commit(state, &trial);
                         *state = trial;
                         done = to;
@@ -1127,6 +1292,17 @@ fn continuation(
                     // lands on the branch beyond the snap if Newton can reach it
                     let mut trial = state.clone();
                     if solve(to, &mut trial, cuts).is_ok() {
+                        on_success_commit(state, &trial);
+                        *state = trial;
+                        done = to;
+                        continue;
+                    }
+                    on_failure_restore();
+                    // or follow the path from the increment's start, by arc length where
+                    // u_s turns back too: the cuts may have stopped where no step of u_s
+                    // leads on (170 kPa at 4 kPa, mesh level -2, 20 steps: h = 1.7735 mm),
+                    // which the path from further back passes
+                    if let Some(trial) = past_limit_point(from, to, &start_state, true) {
                         on_success_commit(state, &trial);
                         *state = trial;
                         done = to;
@@ -1211,7 +1387,7 @@ pub(crate) fn solve_stages(
             |p, state, _| cell.borrow_mut().solve_equilibrium(state, p).map(|_| ()),
             || {},
             |_: &[f64], _: &[f64]| {},
-            |_, _, _: &[f64]| None,
+            |_, _, _: &[f64], _| None,
             "stage 1 (inflation)",
             "kPa",
         )?;
@@ -1382,10 +1558,18 @@ pub(crate) fn solve_stages(
                     c.commit_slip_state(&|n: usize| positions[n]);
                 }
             },
-            |from, to, s: &[f64]| {
+            |from, to, s: &[f64], by_arc_length| {
                 let mut ind = ind_cell.borrow_mut();
-                ind.trace_snap_through(s, from, to, params.pressure_kpa, &current, apex_z0_mm)
-                    .ok()
+                ind.trace_snap_through(
+                    s,
+                    from,
+                    to,
+                    params.pressure_kpa,
+                    &current,
+                    apex_z0_mm,
+                    by_arc_length,
+                )
+                .ok()
             },
             "stage 2 (indentation)",
             "mm of tube travel",
@@ -1451,7 +1635,7 @@ mod tests {
                 },
                 || {},
                 |_: &[f64], _: &[f64]| {},
-                |_, _, _: &[f64]| None,
+                |_, _, _: &[f64], _| None,
                 "test",
                 "mm",
             )

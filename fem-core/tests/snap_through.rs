@@ -85,3 +85,61 @@ fn the_pressurised_shell_does_not_snap_through() {
     assert!(solution.snap_through.is_empty());
     assert_eq!(solution.snap_through_jump(), None);
 }
+
+/// At 4 kPa a 170 kPa sample makes the shell snap through near h = 1.77 mm, and there the
+/// apex displacement turns back as well: past that point no equilibrium has a slightly
+/// larger u_s, so the apex-controlled path stops however small its steps (on the coarse
+/// mesh of the diagnosis tables, 20 steps to 2 mm, the curve used to stop at
+/// h = 1.7735 mm). The path is followed by arc length instead; it reaches the far branch,
+/// where a 40-step solve lands by its direct jump across the snap.
+#[test]
+fn a_snap_through_whose_apex_turns_back_is_followed_by_arc_length() {
+    let params = |steps: usize| CurveParams {
+        sample_modulus_kpa: 170.0,
+        pressure_kpa: 4.0,
+        mesh_level: -2,
+        steps,
+        ..Default::default()
+    };
+    let arc = Simulation::new(&params(20)).solve().unwrap();
+    assert_eq!(arc.stop, StopReason::Completed);
+    let path = &arc.snap_through;
+    // the path goes where apex control cannot: u_s falls along part of it
+    assert!(
+        path.windows(2).any(|w| w[1].u_s_mm < w[0].u_s_mm - 1e-3),
+        "{path:?}"
+    );
+    // and the travel falls below where the snap began before rising past the step's end
+    let h_min = path.iter().map(|p| p.h_mm).fold(f64::INFINITY, f64::min);
+    assert!(h_min < 1.75, "lowest travel on the path {h_min} mm");
+    let direct = Simulation::new(&params(40)).solve().unwrap();
+    assert_eq!(direct.stop, StopReason::Completed);
+    for p in arc.curve.points.iter().filter(|p| p.h_mm > 1.75) {
+        let q = direct
+            .curve
+            .points
+            .iter()
+            .find(|q| (q.h_mm - p.h_mm).abs() < 1e-9)
+            .unwrap();
+        // the same equilibria reached along two paths: they differ by where the contact
+        // augmentation stopped (penetration tolerance 1e-4 mm); measured 0.4 um at
+        // h = 1.8 mm and 1e-8 mm beyond; the snap itself moves u_s by ~0.7 mm
+        assert!(
+            (p.u_s_mm - q.u_s_mm).abs() < 2e-3,
+            "h {}: {} vs {}",
+            p.h_mm,
+            p.u_s_mm,
+            q.u_s_mm
+        );
+        assert!((p.a_mm - q.a_mm).abs() < 2e-3, "{p:?} vs {q:?}");
+    }
+    let at = |h: f64| {
+        arc.curve
+            .points
+            .iter()
+            .find(|p| (p.h_mm - h).abs() < 1e-9)
+            .unwrap()
+            .u_s_mm
+    };
+    assert!(at(1.8) - at(1.7) > 0.5, "the far branch is reached");
+}
