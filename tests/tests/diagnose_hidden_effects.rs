@@ -181,11 +181,11 @@ fn a_thinner_sample_with_a_displacement_offset_names_both() {
 }
 
 #[test]
-// Currently fails: the camera scale is named first (0.035, absorbing friction's radius
-// signature too; fitted to both channels it is also ahead, joint chi2 gain 357 against
-// friction's 208) and friction's remaining gain on the radius (4.8) stays below the step's
-// threshold (8.1); the loads rank candidates but do not detect (docs/diagnosis.md).
-#[ignore = "friction solves; currently fails (see above); run with --release -- --ignored --nocapture"]
+// The camera scale is named first (0.035, absorbing friction's radius signature too); at
+// step 2 friction's remaining gain on the radius (4.8) stays below the step's threshold
+// (8.1), and it is its gain on both channels (joint chi2 562 against the joint threshold,
+// 8.5) that names it (docs/diagnosis.md, Method, step 7).
+#[ignore = "friction solves; run with --release -- --ignored --nocapture"]
 fn friction_with_a_camera_scale_names_both() {
     check_pair(
         Hidden {

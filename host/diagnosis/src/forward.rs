@@ -32,9 +32,12 @@ use super::load_channel::LoadChannel;
 use super::model::Model;
 use super::noise_model::{NoiseModel, Whitener};
 use super::selection::{self, Screened, Threshold};
-use super::signatures::Signature;
+use super::signatures::{self, Signature, Whitening};
 use super::verdict::{self, Decision, Verdict};
 use super::{DiagnoseOptions, GapSummary, stats};
+
+/// Seed offset of the joint threshold's bootstrap (independent of the radius one's draws).
+const JOINT_THRESHOLD_SEED: u64 = 0x6a6f_696e;
 
 /// At most this many effects are added (the data of one experiment, two pressures of a few
 /// replicates, rarely support more parameters than the modulus and three effects).
@@ -46,6 +49,8 @@ pub struct StepOutcome {
     pub base: GlsFit,
     pub sigs: Vec<Signature>,
     pub threshold: Threshold,
+    /// The threshold of the joint chi^2 gain (steps after the first, with loads).
+    pub joint_threshold: Option<Threshold>,
     pub screened: Vec<Screened>,
     pub load: Option<LoadChannel>,
     pub decision: Decision,
@@ -78,6 +83,29 @@ pub fn step(
         options.seed,
     );
     let t95 = threshold.delta_chi2_95;
+    // after an effect is added, a candidate may also pass by its gain in the fit to both
+    // channels, against that gain's own calibrated threshold: the same bootstrap on the
+    // signatures whitened in both channels together (module notes)
+    let joint_threshold = load
+        .as_ref()
+        .and_then(|lc| lc.joint.as_ref())
+        .filter(|_| !model.included.is_empty())
+        .map(|j| {
+            let (_, joint_sigs) = signatures::signatures_in(
+                model,
+                cands,
+                points,
+                subset,
+                Whitening::Joint(j),
+                prelim.base.modulus_kpa,
+            );
+            selection::bootstrap_threshold(
+                &joint_sigs,
+                j.len(),
+                options.bootstrap,
+                options.seed ^ JOINT_THRESHOLD_SEED,
+            )
+        });
     let base = prelim.base;
     let sigs = prelim.sigs;
     let mut screened = selection::screen_and_refit(
@@ -90,6 +118,7 @@ pub fn step(
         t95,
         options.refit,
         load.as_ref(),
+        joint_threshold.as_ref().map(|t| t.delta_chi2_95),
     );
     for s in screened.iter_mut() {
         if let Some(f) = &s.fit
@@ -147,6 +176,7 @@ pub fn step(
         base,
         sigs,
         threshold,
+        joint_threshold,
         screened,
         load,
         decision,
@@ -196,6 +226,12 @@ pub struct ForwardStep {
     /// chi^2 improvement of the refit and the step's calibrated threshold.
     pub delta_chi2: f64,
     pub threshold_chi2: f64,
+    /// The joint chi^2 gain (radius and load) and its calibrated threshold, when the step
+    /// had one (steps after the first, with loads); `passed_on_both_channels` when that,
+    /// not the radius gain, let the effect in.
+    pub joint_delta_chi2: Option<f64>,
+    pub joint_threshold_chi2: Option<f64>,
+    pub passed_on_both_channels: bool,
     /// Held-out gain and its calibrated margin.
     pub held_out_gain: Option<f64>,
     pub held_out_margin: Option<f64>,
@@ -373,6 +409,9 @@ pub fn run(
             refitted: named[..named.len() - 1].to_vec(),
             delta_chi2: w.delta_chi2.unwrap_or(0.0),
             threshold_chi2: outcome.threshold.delta_chi2_95,
+            joint_delta_chi2: w.delta_joint_chi2,
+            joint_threshold_chi2: outcome.joint_threshold.as_ref().map(|t| t.delta_chi2_95),
+            passed_on_both_channels: w.passes_joint_threshold,
             held_out_gain: w.held_out.as_ref().map(selection::HeldOut::gain),
             held_out_margin: w.held_out.as_ref().map(|h| h.margin_chi2),
             gap_shrink: before.chi2_per_dof / after.chi2_per_dof.max(1e-300),

@@ -275,7 +275,7 @@ fn run_selection(
         signatures::signatures(model, cands, points, subset, whitener, base.modulus_kpa);
     let t = threshold.unwrap_or(f64::INFINITY);
     let screened = selection::screen_and_refit(
-        model, &sigs, points, subset, whitener, &base, t, refit, load,
+        model, &sigs, points, subset, whitener, &base, t, refit, load, None,
     );
     Some(SelectionRun {
         base,

@@ -310,6 +310,17 @@ fn forward_text(s: &mut String, d: &Diagnosis) {
             st.held_out_gain.map_or("-".into(), |v| format!("{v:.1}")),
             st.held_out_margin.map_or("-".into(), |v| format!("{v:.1}")),
         );
+        if let (Some(dj), Some(tj)) = (st.joint_delta_chi2, st.joint_threshold_chi2) {
+            let _ = writeln!(
+                s,
+                "          radius and load together: gain {dj:.1} vs threshold {tj:.1}{}",
+                if st.passed_on_both_channels {
+                    " (passed on both channels)"
+                } else {
+                    ""
+                }
+            );
+        }
         for r in &st.refitted {
             let _ = writeln!(
                 s,

@@ -348,6 +348,9 @@ pub struct Screened {
     pub joint_fit: Option<GlsFit>,
     /// Joint chi^2 of the model without the candidate minus the candidate's.
     pub delta_joint_chi2: Option<f64>,
+    /// Passed by its joint chi^2 gain against the joint threshold (forward steps after the
+    /// first; [`super::forward::step`]), not by its radius gain.
+    pub passes_joint_threshold: bool,
 }
 
 impl Screened {
@@ -377,6 +380,7 @@ pub fn screen_and_refit(
     threshold: f64,
     refit: usize,
     load: Option<&LoadChannel>,
+    joint_threshold: Option<f64>,
 ) -> Vec<Screened> {
     let mut out: Vec<Screened> = sigs
         .iter()
@@ -400,6 +404,7 @@ pub fn screen_and_refit(
             delta_load_chi2: None,
             joint_fit: None,
             delta_joint_chi2: None,
+            passes_joint_threshold: false,
         })
         .collect();
     out.sort_by(|a, b| b.screen_delta_chi2.total_cmp(&a.screen_delta_chi2));
@@ -487,6 +492,13 @@ pub fn screen_and_refit(
                     let best =
                         start(f.modulus_kpa, f.theta).or_else(|| start(base.modulus_kpa, theta0));
                     s.delta_joint_chi2 = best.as_ref().map(|jf| bj.chi2 - jf.chi2);
+                    if let (Some(tj), Some(dj)) = (joint_threshold, s.delta_joint_chi2)
+                        && dj > tj
+                        && !s.passes_threshold
+                    {
+                        s.passes_threshold = true;
+                        s.passes_joint_threshold = true;
+                    }
                     s.joint_fit = best;
                 }
             }

@@ -10,8 +10,9 @@
 
 use serde::Serialize;
 
-use super::candidates::{Candidate, predict_a, predict_with};
+use super::candidates::{Candidate, predict, predict_with};
 use super::data::Point;
+use super::joint::JointWhitener;
 use super::linalg::dot;
 use super::model::{Channel, Model};
 use super::noise_model::Whitener;
@@ -59,23 +60,71 @@ impl Signature {
     }
 }
 
-/// Whitened derivative of the prediction along a parameter (forward difference).
+/// How residuals are whitened: the contact radius alone, or the radius and the load stacked
+/// with their joint covariance ([`JointWhitener`]).
+#[derive(Debug, Clone, Copy)]
+pub enum Whitening<'w> {
+    Radius(&'w Whitener),
+    Joint(&'w JointWhitener),
+}
+
+impl Whitening<'_> {
+    /// The channels the whitened vector holds.
+    fn channels(&self) -> &'static [Channel] {
+        match self {
+            Self::Radius(_) => &[Channel::Radius],
+            Self::Joint(_) => &[Channel::Radius, Channel::Load],
+        }
+    }
+
+    /// Length of a whitened vector.
+    pub fn len(&self) -> usize {
+        match self {
+            Self::Radius(w) => w.len(),
+            Self::Joint(j) => j.len(),
+        }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Whitens one vector per channel (over all points, in [`Self::channels`] order).
+    fn whiten(&self, per_channel: &[Vec<f64>]) -> Vec<f64> {
+        match self {
+            Self::Radius(w) => w.whiten(&per_channel[0]),
+            Self::Joint(j) => j.whiten(&per_channel[0], &per_channel[1]),
+        }
+    }
+}
+
+/// Whitened derivative of the prediction along a parameter (forward difference), in every
+/// channel of `whitening`; `f0` holds each channel's prediction at the fit.
 fn whitened_derivative(
     points: &[Point],
     subset: &[usize],
-    whitener: &Whitener,
-    f0: &[f64],
-    eval: impl Fn(&Point) -> f64,
+    whitening: Whitening<'_>,
+    f0: &[Vec<f64>],
+    eval: impl Fn(&Point, Channel) -> f64,
     step: f64,
 ) -> Vec<f64> {
-    let mut d = vec![0.0; points.len()];
-    for &i in subset {
-        d[i] = (eval(&points[i]) - f0[i]) / step;
-    }
-    whitener.whiten(&d)
+    let d: Vec<Vec<f64>> = whitening
+        .channels()
+        .iter()
+        .zip(f0)
+        .map(|(&channel, f0)| {
+            let mut d = vec![0.0; points.len()];
+            for &i in subset {
+                d[i] = (eval(&points[i], channel) - f0[i]) / step;
+            }
+            d
+        })
+        .collect();
+    whitening.whiten(&d)
 }
 
-/// Modulus direction j and each candidate's signature at baseline modulus `e`.
+/// Modulus direction j and each candidate's signature at baseline modulus `e`, whitened in
+/// the contact radius alone.
 pub fn signatures(
     model: &Model<'_>,
     candidates: &[Candidate],
@@ -84,17 +133,44 @@ pub fn signatures(
     whitener: &Whitener,
     e: f64,
 ) -> (Vec<f64>, Vec<Signature>) {
-    let mut f0 = vec![0.0; points.len()];
-    for &i in subset {
-        f0[i] = predict_a(model, None, e, 0.0, &points[i]);
-    }
+    signatures_in(
+        model,
+        candidates,
+        points,
+        subset,
+        Whitening::Radius(whitener),
+        e,
+    )
+}
+
+/// Modulus direction j and each candidate's signature at baseline modulus `e`, whitened as
+/// `whitening` says (with [`Whitening::Joint`]: the signatures of a fit to both channels).
+pub fn signatures_in(
+    model: &Model<'_>,
+    candidates: &[Candidate],
+    points: &[Point],
+    subset: &[usize],
+    whitening: Whitening<'_>,
+    e: f64,
+) -> (Vec<f64>, Vec<Signature>) {
+    let f0: Vec<Vec<f64>> = whitening
+        .channels()
+        .iter()
+        .map(|&channel| {
+            let mut f0 = vec![0.0; points.len()];
+            for &i in subset {
+                f0[i] = predict(model, None, e, 0.0, &points[i], channel);
+            }
+            f0
+        })
+        .collect();
     let h = 1e-3;
     let j = whitened_derivative(
         points,
         subset,
-        whitener,
+        whitening,
         &f0,
-        |p| predict_a(model, None, e * h.exp(), 0.0, p),
+        |p, channel| predict(model, None, e * h.exp(), 0.0, p, channel),
         h,
     );
     let jj = dot(&j, &j).max(1e-300);
@@ -112,9 +188,9 @@ pub fn signatures(
         let mut g = whitened_derivative(
             points,
             subset,
-            whitener,
+            whitening,
             &f0,
-            |p| predict_with(model, &th, None, e, 0.0, p, Channel::Radius),
+            |p, channel| predict_with(model, &th, None, e, 0.0, p, channel),
             step,
         );
         let k = dot(&j, &g) / jj;
@@ -151,9 +227,9 @@ pub fn signatures(
             let g = whitened_derivative(
                 points,
                 subset,
-                whitener,
+                whitening,
                 &f0,
-                |p| predict_a(model, Some(c), e, probe, p),
+                |p, channel| predict(model, Some(c), e, probe, p, channel),
                 probe,
             );
             let k = dot(&j, &g) / jj;
