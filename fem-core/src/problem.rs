@@ -1215,7 +1215,7 @@ const ARC_MOVE_MM: f64 = 0.02;
 const ARC_MAX_STEPS: usize = 150;
 /// A step of the arc-length path that moves the apex or the tube by more than this many
 /// times [`ARC_MOVE_MM`] is taken back and halved (170 kPa at 4 kPa, mesh level -2: a step
-/// aimed at 0.02 mm landed 0.14 mm away in u_s, back on the stable branch).
+/// aimed at 0.02 mm ended 0.14 mm away in u_s, back on the stable branch).
 const ARC_JUMP: f64 = 2.5;
 /// Halvings of the arc length in a row after which the path gives up.
 const ARC_MAX_CUTS: usize = 8;
