@@ -41,6 +41,57 @@ pub struct Hidden {
     pub size: f64,
 }
 
+/// An effect outside the diagnosis's library: no candidate models it, so the right
+/// answer is `unexplained` (with where the disagreement sits), not the nearest name.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Outside {
+    /// Radial distortion of the in-sensor camera's lens: a radius r in the sample plane is
+    /// seen at r (1 + k r^2) (the first radial term of the Brown–Conrady model; Brown,
+    /// "Decentering distortion of lenses", 1966), `k_per_mm2` in 1/mm^2. Unlike a scale
+    /// error it grows with the contact radius: k = 0.001 is +0.4 % at a = 2 mm and +1.2 %
+    /// at 3.5 mm.
+    LensDistortion { k_per_mm2: f64 },
+    /// A leak downstream of the manometer that the controller does not see: the shell's
+    /// true pressure falls linearly during each indentation, by `kpa_per_s` from the set
+    /// point at contact (the truth is read between solves at the set point and 1 kPa
+    /// below it, linear in p_air).
+    PressureLeak { kpa_per_s: f64 },
+}
+
+impl Outside {
+    /// The names `tactile diagnose --simulate` takes.
+    pub const NAMES: [&'static str; 2] = ["lens_distortion", "pressure_leak"];
+
+    /// From `--simulate` syntax (name, size).
+    pub fn from_name(name: &str, size: f64) -> Option<Self> {
+        match name {
+            "lens_distortion" => Some(Self::LensDistortion { k_per_mm2: size }),
+            "pressure_leak" => Some(Self::PressureLeak { kpa_per_s: size }),
+            _ => None,
+        }
+    }
+
+    /// The pressure drop of a leak at time `t_s` of an indentation (0 for other effects).
+    fn pressure_drop_kpa(&self, t_s: f64) -> f64 {
+        match self {
+            Self::PressureLeak { kpa_per_s } => kpa_per_s * t_s,
+            Self::LensDistortion { .. } => 0.0,
+        }
+    }
+
+    /// The radius the camera reports for a radius `a_mm` (unchanged for other effects).
+    fn seen_radius_mm(&self, a_mm: f64) -> f64 {
+        match self {
+            Self::LensDistortion { k_per_mm2 } => a_mm * (1.0 + k_per_mm2 * a_mm * a_mm),
+            Self::PressureLeak { .. } => a_mm,
+        }
+    }
+}
+
+/// How far below the set point the leak's truth solves reach (kPa): a leak must not take
+/// the pressure further within one indentation.
+pub const LEAK_RANGE_KPA: f64 = 1.0;
+
 /// A simulated experiment.
 #[derive(Debug, Clone)]
 pub struct SimSpec {
@@ -51,6 +102,8 @@ pub struct SimSpec {
     /// Further hidden effects on top of `hidden` (several discrepancies at once; at most one
     /// of each kind, the physical ones in one sample).
     pub also_hidden: Vec<Hidden>,
+    /// An effect outside the library on top of the others.
+    pub outside: Option<Outside>,
     /// Noise level (1 = the demo's).
     pub noise: f64,
     pub fps: f64,
@@ -67,6 +120,7 @@ impl Default for SimSpec {
             replicates: 5,
             hidden: None,
             also_hidden: Vec::new(),
+            outside: None,
             noise: 1.0,
             fps: 30.0,
             speed_mm_per_s: 1.0,
@@ -138,6 +192,11 @@ pub fn truth_scenario(spec: &SimSpec) -> Scenario {
                 pressures = pressures.iter().map(|p| p - h.size).collect();
             }
         }
+    }
+    if let Some(Outside::PressureLeak { .. }) = spec.outside {
+        let below: Vec<f64> = pressures.iter().map(|p| p - LEAK_RANGE_KPA).collect();
+        pressures.extend(below);
+        pressures.sort_by(f64::total_cmp);
     }
     s.effects = effects;
     s.mechanics = MechanicsSource::Solve {
@@ -268,9 +327,13 @@ pub fn simulate_with(spec: &SimSpec, scenario: &Scenario, truth: &Truth) -> Vec<
                     );
                 }
                 h_prev = h;
-                let cs = state.finish(cfg, mech.contact(h, p_true, e_eff));
+                let drop = spec
+                    .outside
+                    .map_or(0.0, |o| o.pressure_drop_kpa(t).min(LEAK_RANGE_KPA));
+                let cs = state.finish(cfg, mech.contact(h, p_true - drop, e_eff));
                 drift = drift * decay + drift_u * (1.0 - decay * decay).sqrt() * rng.gaussian();
                 let a = cfg.camera_radius_mm(cs.a_mm);
+                let a = spec.outside.map_or(a, |o| o.seen_radius_mm(a));
                 if a <= 0.0 {
                     continue;
                 }

@@ -55,7 +55,9 @@ pub struct DiagnoseArgs {
     pub only: Vec<String>,
     /// Simulate hidden-effect data with hil-sim: EFFECT=SIZE (e.g. friction=0.4), several
     /// joined by commas (e.g. finite_thickness=1.5,displacement_offset=0.04), or none;
-    /// writes simulated.csv into --out.
+    /// also one effect outside the library: lens_distortion=K (1/mm^2, the image radius
+    /// r (1 + K r^2)) or pressure_leak=RATE (kPa/s during each indentation); writes
+    /// simulated.csv into --out.
     #[arg(long, value_name = "EFFECT=SIZE")]
     pub simulate: Option<String>,
     /// True modulus for --simulate.
@@ -228,9 +230,10 @@ fn load_tables(args: &DiagnoseArgs) -> Result<Tables, String> {
 
 fn simulate(args: &DiagnoseArgs, spec: &str) -> ExitCode {
     use diagnosis::candidates::EffectKind;
-    use diagnosis::simulate::{Hidden, SimSpec, simulate, to_curve_csv};
+    use diagnosis::simulate::{Hidden, Outside, SimSpec, simulate, to_curve_csv};
     // EFFECT=SIZE[,EFFECT=SIZE...]: several hidden effects at once
     let mut all_hidden: Vec<Hidden> = Vec::new();
+    let mut outside: Option<Outside> = None;
     if spec != "none" {
         for part in spec.split(',') {
             let Some((name, size)) = part.split_once('=') else {
@@ -238,14 +241,25 @@ fn simulate(args: &DiagnoseArgs, spec: &str) -> ExitCode {
                     "--simulate {spec}: expected EFFECT=SIZE[,EFFECT=SIZE...] or none"
                 ));
             };
-            let Some(kind) = EffectKind::from_name(name) else {
-                return bad_input(format!(
-                    "--simulate: unknown effect {name:?} (known: {})",
-                    EffectKind::ALL.map(|k| k.name()).join(", ")
-                ));
-            };
             let Ok(size) = size.parse::<f64>() else {
                 return bad_input(format!("--simulate: size {size:?} is not a number"));
+            };
+            if let Some(o) = Outside::from_name(name, size) {
+                if outside.is_some() {
+                    return bad_input(format!(
+                        "--simulate: {name}: at most one effect outside the library ({})",
+                        Outside::NAMES.join(", ")
+                    ));
+                }
+                outside = Some(o);
+                continue;
+            }
+            let Some(kind) = EffectKind::from_name(name) else {
+                return bad_input(format!(
+                    "--simulate: unknown effect {name:?} (known: {}; outside the library: {})",
+                    EffectKind::ALL.map(|k| k.name()).join(", "),
+                    Outside::NAMES.join(", ")
+                ));
             };
             if all_hidden.iter().any(|h| h.kind == kind) {
                 return bad_input(format!("--simulate: {name} given twice"));
@@ -271,6 +285,7 @@ fn simulate(args: &DiagnoseArgs, spec: &str) -> ExitCode {
         modulus_kpa: args.modulus,
         hidden,
         also_hidden,
+        outside,
         noise: args.noise,
         seed: args.seed,
         ..SimSpec::default()
