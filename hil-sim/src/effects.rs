@@ -54,6 +54,10 @@ pub struct EffectsConfig {
     pub proximity_drift_mm_per_s: f64,
     /// Manometer offset p_0.
     pub manometer_offset_kpa: f64,
+    /// The proximity and manometer offsets appeared after the bench was calibrated (a stale
+    /// calibration, made on another day): the rigid-sample calibration of `tactile demo`
+    /// runs without them, so they are not removed and reach the measurement.
+    pub offsets_after_calibration: bool,
     /// Probe tilt relative to the sample normal.
     pub tilt_deg: f64,
 }
@@ -69,6 +73,7 @@ impl Default for EffectsConfig {
             proximity_offset_mm: 0.0,
             proximity_drift_mm_per_s: 0.0,
             manometer_offset_kpa: 0.0,
+            offsets_after_calibration: false,
             tilt_deg: 0.0,
         }
     }

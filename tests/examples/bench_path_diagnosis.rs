@@ -12,7 +12,9 @@
 //! later in the forward selection) and how often clean data names something. A proximity
 //! offset and a manometer offset present from the start are removed by the bench's own
 //! calibrations (the rigid sweep, the vent-open zero), so for them `none` is the expected
-//! verdict here; a case whose truth cannot be solved is listed as not run.
+//! verdict; they run a second time with a stale calibration (`+stale`: the offsets appeared
+//! after the bench was calibrated), where the diagnosis should name them. A case whose
+//! truth cannot be solved is listed as not run.
 //!
 //!     cargo run --release -p system-tests --example bench_path_diagnosis -- OUTDIR \
 //!         [--seeds N] [--null-seeds N] [--effects NAME,...] [--clear-only]
@@ -111,7 +113,12 @@ fn parse_args() -> Result<Args, String> {
 }
 
 /// Runs one case: two bench runs, their records diagnosed.
-fn run_case(hidden: Option<Hidden>, seed: u64, dir: &Path) -> Result<CaseResult, String> {
+fn run_case(
+    hidden: Option<Hidden>,
+    stale: bool,
+    seed: u64,
+    dir: &Path,
+) -> Result<CaseResult, String> {
     let started = Instant::now();
     let modulus = truth_modulus_kpa(hidden.map(|h| h.kind));
     let spec = SimSpec {
@@ -121,12 +128,14 @@ fn run_case(hidden: Option<Hidden>, seed: u64, dir: &Path) -> Result<CaseResult,
         ..SimSpec::default()
     };
     let mut scenario = truth_scenario(&spec);
+    scenario.effects.offsets_after_calibration = stale;
     // The truth of a manometer offset assumes the controller regulates the offset reading
-    // (the sample then sits at p - p0); the bench's vent-open zero removes the offset
-    // first, so the sample sits at the set point: solve there too.
+    // (the sample then sits at p - p0, as with a stale calibration); the bench's vent-open
+    // zero removes the offset first, so the sample sits at the set point: solve there too.
     if let (Some(h), MechanicsSource::Solve { pressures_kpa, .. }) =
         (hidden, &mut scenario.mechanics)
         && h.kind == EffectKind::PressureOffset
+        && !stale
     {
         pressures_kpa.extend(PRESSURES_KPA);
         pressures_kpa.sort_by(f64::total_cmp);
@@ -172,7 +181,7 @@ fn run_case(hidden: Option<Hidden>, seed: u64, dir: &Path) -> Result<CaseResult,
             .find_map(|p| p.get("value").and_then(serde_json::Value::as_f64))
     };
     Ok(CaseResult {
-        effect: hidden.map_or("none".into(), |h| h.kind.name().to_string()),
+        effect: hidden.map_or("none".into(), |h| label(h.kind, stale)),
         size: hidden.map_or(0.0, |h| h.size),
         seed,
         true_modulus_kpa: modulus,
@@ -186,6 +195,24 @@ fn run_case(hidden: Option<Hidden>, seed: u64, dir: &Path) -> Result<CaseResult,
     })
 }
 
+/// The instrument offsets the bench's own calibrations remove when present from the start;
+/// they also run with a stale calibration (`EffectsConfig::offsets_after_calibration`).
+fn removed_by_calibration(kind: EffectKind) -> bool {
+    matches!(
+        kind,
+        EffectKind::DisplacementOffset | EffectKind::PressureOffset
+    )
+}
+
+/// A case's effect column: the effect's name, `+stale` with a stale calibration.
+fn label(kind: EffectKind, stale: bool) -> String {
+    if stale {
+        format!("{}+stale", kind.name())
+    } else {
+        kind.name().to_string()
+    }
+}
+
 fn main() -> ExitCode {
     let args = match parse_args() {
         Ok(a) => a,
@@ -194,7 +221,8 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
-    let mut cases: Vec<(Option<Hidden>, u64)> = (1..=args.null_seeds).map(|s| (None, s)).collect();
+    let mut cases: Vec<(Option<Hidden>, bool, u64)> =
+        (1..=args.null_seeds).map(|s| (None, false, s)).collect();
     for &kind in &args.effects {
         let [small, clear] = sizes(kind);
         let wanted = if args.clear_only {
@@ -202,9 +230,16 @@ fn main() -> ExitCode {
         } else {
             vec![clear, small]
         };
-        for size in wanted {
-            for seed in 1..=args.seeds {
-                cases.push((Some(Hidden { kind, size }), 100 + seed));
+        let stale: &[bool] = if removed_by_calibration(kind) {
+            &[false, true]
+        } else {
+            &[false]
+        };
+        for &stale in stale {
+            for &size in &wanted {
+                for seed in 1..=args.seeds {
+                    cases.push((Some(Hidden { kind, size }), stale, 100 + seed));
+                }
             }
         }
     }
@@ -213,13 +248,13 @@ fn main() -> ExitCode {
     );
     let mut results = Vec::new();
     let mut failed = 0;
-    for (hidden, seed) in cases {
+    for (hidden, stale, seed) in cases {
         let name = hidden.map_or("none".to_string(), |h| {
-            format!("{}-{}", h.kind.name(), h.size)
+            format!("{}-{}", label(h.kind, stale), h.size)
         });
         let dir = args.out.join(format!("case-{name}-{seed}"));
         let _ = std::fs::create_dir_all(&dir);
-        match run_case(hidden, seed, &dir) {
+        match run_case(hidden, stale, seed, &dir) {
             Ok(r) => {
                 println!(
                     "{:<20} {:<8} {:<5} {:<13} {:<40} {:<22} {:>6.1} -> {:>6} [{:.0}] {:>5.0}",
@@ -290,14 +325,15 @@ fn summary(results: &[CaseResult]) {
             .iter()
             .filter(|r| r.effect == effect && r.size == size)
             .collect();
-        let first = of
-            .iter()
-            .filter(|r| r.named.first() == Some(&effect))
-            .count();
-        let any = of.iter().filter(|r| r.named.contains(&effect)).count();
+        let name = effect.trim_end_matches("+stale").to_string();
+        let first = of.iter().filter(|r| r.named.first() == Some(&name)).count();
+        let any = of.iter().filter(|r| r.named.contains(&name)).count();
         // the bench's own calibrations remove these two instrument offsets: the rigid
         // sweep sees the proximity offset, the vent-open zero the manometer's
         let calibrated_out = match effect.as_str() {
+            "displacement_offset+stale" | "pressure_offset+stale" => {
+                " (a stale calibration: the offset reaches the measurement)"
+            }
             "displacement_offset" => {
                 " (removed by the rigid-sample proximity calibration: none expected)"
             }

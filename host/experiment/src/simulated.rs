@@ -486,6 +486,12 @@ pub fn rigid_scenario(scenario: &Scenario, pressure_kpa: f64) -> Scenario {
     rigid.effects.viscoelastic = None;
     rigid.effects.strain_stiffening = 0.0;
     rigid.effects.adhesion_mj_per_m2 = 0.0;
+    if scenario.effects.offsets_after_calibration {
+        // a stale calibration: the offsets were not there when it was made
+        rigid.effects.proximity_offset_mm = 0.0;
+        rigid.effects.proximity_drift_mm_per_s = 0.0;
+        rigid.effects.manometer_offset_kpa = 0.0;
+    }
     rigid
 }
 
