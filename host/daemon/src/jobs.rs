@@ -60,6 +60,7 @@ impl LoadedCalibration {
             px_per_mm_sigma: self.record.px_per_mm_sigma.unwrap_or(0.0),
             offset_px: self.record.px_offset_px,
             samples: 0,
+            lens_distortion: None,
         })
     }
 }

@@ -223,6 +223,7 @@ mod tests {
             px_per_mm_sigma: 0.0,
             offset_px: None,
             samples: 1,
+            lens_distortion: None,
         };
         let mut source = CameraRadiusSource::start(Unplugged { good: 3, sent: 0 }, reference, px)
             .expect("start");

@@ -130,6 +130,7 @@ pub fn px_per_mm_of(calibration: &CalibrationRecord) -> Result<PxPerMmCalibratio
         px_per_mm_sigma: calibration.px_per_mm_sigma.unwrap_or(0.0),
         offset_px: calibration.px_offset_px,
         samples: 0,
+        lens_distortion: None,
     })
 }
 

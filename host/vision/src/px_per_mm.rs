@@ -7,7 +7,13 @@
 //! Several sizes: the straight line `r_px = k r_mm + b` by least squares (Montgomery,
 //! *Introduction to Linear Regression*, eqs. 2.9-2.10 for the slope's standard error), so a
 //! constant edge offset `b` (e.g. a meniscus ring around the contact) is separated from the
-//! scale.
+//! scale. Four or more sizes also test the line itself: a radial lens distortion sees a
+//! radius r at r (1 + k r^2) (the first radial term of Brown's model, "Decentering
+//! distortion of lenses", 1966), so `r_px = b + s r + c r^3` is fitted by weighted least
+//! squares (weights 1/sigma^2 of each disc's measured radius) and k = c / s reported with
+//! its standard error ([`LensDistortion`]). A scale and an offset absorb such a distortion
+//! over the radii a contact reaches, so the contact-radius curves alone cannot show it
+//! (docs/diagnosis.md, limitations); the discs can.
 
 use super::contact_radius::{ContactRadiusConfig, ContactRadiusEstimator, VisionError};
 use crate::GrayImage;
@@ -20,6 +26,85 @@ pub struct PxPerMmCalibration {
     /// Edge offset in px (fitted only with two or more distinct disc radii).
     pub offset_px: Option<f64>,
     pub samples: usize,
+    /// The radial lens distortion the discs show (four or more distinct radii).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lens_distortion: Option<LensDistortion>,
+}
+
+/// The first radial distortion term fitted through the discs: a radius r is seen at
+/// r (1 + k r^2).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct LensDistortion {
+    /// k in 1/mm^2 (0: none).
+    pub k_per_mm2: f64,
+    /// Its standard error, from the discs' measurement errors.
+    pub k_sigma_per_mm2: f64,
+}
+
+impl LensDistortion {
+    /// Whether k differs from 0 by more than [`Self::SIGNIFICANT_Z`] standard errors.
+    pub fn significant(&self) -> bool {
+        self.k_sigma_per_mm2 > 0.0
+            && (self.k_per_mm2 / self.k_sigma_per_mm2).abs() > Self::SIGNIFICANT_Z
+    }
+
+    /// |k| / se beyond which the distortion is reported as present (a two-sided normal
+    /// test at p < 0.003).
+    pub const SIGNIFICANT_Z: f64 = 3.0;
+
+    /// The relative change of a radius r (mm) the distortion causes.
+    pub fn relative_at(&self, r_mm: f64) -> f64 {
+        self.k_per_mm2 * r_mm * r_mm
+    }
+}
+
+/// Smallest per-disc standard error used as a weight (px): the edge estimator's own
+/// systematic error, which its per-frame error prediction does not contain: hil-sim's
+/// exactly scaled discs (1.2-3.4 mm at 50 px/mm, no distortion) measured by this crate with
+/// their predicted errors alone (about 0.01 px) showed a "distortion" of 9e-5 /mm^2 at 4.8
+/// standard errors; with this floor the same discs give 1.1 (`tests/tests/camera_discs.rs`).
+/// The smallest distortion then seen at 3 standard errors changes a 3.4 mm radius by
+/// about 0.3 %.
+const SIGMA_FLOOR_PX: f64 = 0.05;
+
+/// Fits `r_px = b + s r + c r^3` by weighted least squares to (radius_mm, radius_px,
+/// sigma_px) samples; k = c / s with its standard error from (X^T W X)^-1.
+fn lens_distortion(samples: &[(f64, f64, f64)]) -> Option<LensDistortion> {
+    let mut a = [[0.0; 3]; 3];
+    let mut rhs = [0.0; 3];
+    for &(r, px, sigma) in samples {
+        let w = 1.0 / sigma.max(SIGMA_FLOOR_PX).powi(2);
+        let x = [1.0, r, r * r * r];
+        for i in 0..3 {
+            for j in 0..3 {
+                a[i][j] += w * x[i] * x[j];
+            }
+            rhs[i] += w * x[i] * px;
+        }
+    }
+    let [b, slope, c] = super::linear_solve::solve(a, rhs)?;
+    let [_, _, var_c] = super::linear_solve::solve(a, [0.0, 0.0, 1.0])?;
+    if slope <= 0.0 || var_c < 0.0 {
+        return None;
+    }
+    // residuals larger than the weights say (chi^2 per degree of freedom above 1) widen
+    // the error by its square root (the Birge ratio)
+    let dof = samples.len().saturating_sub(3);
+    let chi2: f64 = samples
+        .iter()
+        .map(|&(r, px, sigma)| {
+            ((px - b - slope * r - c * r * r * r) / sigma.max(SIGMA_FLOOR_PX)).powi(2)
+        })
+        .sum();
+    let inflation = if dof > 0 {
+        (chi2 / dof as f64).max(1.0).sqrt()
+    } else {
+        1.0
+    };
+    Some(LensDistortion {
+        k_per_mm2: c / slope,
+        k_sigma_per_mm2: inflation * var_c.sqrt() / slope,
+    })
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -58,11 +143,19 @@ impl PxPerMmCalibration {
             let b = mean_px - k * mean_mm;
             let sse: f64 = samples.iter().map(|s| (s.1 - k * s.0 - b).powi(2)).sum();
             let sigma2 = sse / (nf - 2.0);
+            let mut radii: Vec<f64> = samples.iter().map(|s| s.0).collect();
+            radii.sort_by(f64::total_cmp);
+            radii.dedup_by(|a, b| (*a - *b).abs() <= 1e-9 * b.abs());
             return Ok(Self {
                 px_per_mm: k,
                 px_per_mm_sigma: (sigma2 / sxx).sqrt(),
                 offset_px: Some(b),
                 samples: n,
+                lens_distortion: if radii.len() >= 4 {
+                    lens_distortion(samples)
+                } else {
+                    None
+                },
             });
         }
         let ratios: Vec<f64> = samples.iter().map(|s| s.1 / s.0).collect();
@@ -77,6 +170,7 @@ impl PxPerMmCalibration {
             px_per_mm_sigma: sigma,
             offset_px: None,
             samples: n,
+            lens_distortion: None,
         })
     }
 
@@ -102,5 +196,49 @@ impl PxPerMmCalibration {
 
     pub fn px_to_mm(&self, px: f64) -> f64 {
         (px - self.offset_px.unwrap_or(0.0)) / self.px_per_mm
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Discs of the demo's radii seen through a lens with distortion `k` at 50 px/mm and a
+    /// 3 px edge offset, each radius with an error of `sigma` px (a fixed pattern of
+    /// +-1 sigma, so the test does not depend on a random draw).
+    fn discs(k: f64, sigma: f64) -> Vec<(f64, f64, f64)> {
+        [1.2, 2.0, 2.8, 3.4, 1.6]
+            .iter()
+            .zip([1.0, -1.0, 1.0, -1.0, -1.0])
+            .map(|(&r, e)| (r, 3.0 + 50.0 * r * (1.0 + k * r * r) + e * sigma, sigma))
+            .collect()
+    }
+
+    #[test]
+    fn a_lens_distortion_is_measured_from_the_discs() {
+        let cal = PxPerMmCalibration::from_measurements(&discs(0.002, 0.05)).unwrap();
+        let d = cal.lens_distortion.unwrap();
+        // the truth within 3 standard errors, and clearly present
+        assert!(
+            (d.k_per_mm2 - 0.002).abs() < 3.0 * d.k_sigma_per_mm2,
+            "{d:?}"
+        );
+        assert!(d.significant(), "{d:?}");
+    }
+
+    #[test]
+    fn straight_discs_show_no_distortion() {
+        let cal = PxPerMmCalibration::from_measurements(&discs(0.0, 0.05)).unwrap();
+        let d = cal.lens_distortion.unwrap();
+        assert!(!d.significant(), "{d:?}");
+        // the line is what the scale reports
+        assert!((cal.px_per_mm - 50.0).abs() < 0.1, "{cal:?}");
+    }
+
+    #[test]
+    fn three_disc_sizes_cannot_test_the_line() {
+        let samples: Vec<_> = discs(0.002, 0.05).into_iter().take(3).collect();
+        let cal = PxPerMmCalibration::from_measurements(&samples).unwrap();
+        assert_eq!(cal.lens_distortion, None);
     }
 }

@@ -287,6 +287,22 @@ fn calibrate(args: &CalibrateArgs) -> Result<(CalibrationRecord, Vec<String>), (
                     .unwrap_or_default(),
                 samples.len()
             ));
+            if let Some(d) = cal.lens_distortion {
+                let largest = samples.iter().map(|s| s.0).fold(0.0, f64::max);
+                lines.push(if d.significant() {
+                    format!(
+                        "warning: the discs' radii are not proportional to their size: a lens distortion k = {:.2e} ± {:.1e} /mm² (a radius r is seen at r (1 + k r²); {:+.2} % at {largest} mm), which the px/mm scale cannot describe: contact radii away from the discs' are off by the difference",
+                        d.k_per_mm2,
+                        d.k_sigma_per_mm2,
+                        100.0 * d.relative_at(largest)
+                    )
+                } else {
+                    format!(
+                        "camera: no lens distortion seen (k = {:.1e} ± {:.1e} /mm²)",
+                        d.k_per_mm2, d.k_sigma_per_mm2
+                    )
+                });
+            }
             r
         }
     };
