@@ -724,12 +724,7 @@ impl Indentation {
                     reference: f64::NAN,
                 });
             }
-            let saved: Vec<Vec<f64>> = self
-                .model
-                .contacts
-                .iter()
-                .map(|c| c.multipliers.clone())
-                .collect();
+            let saved = self.saved_multipliers();
             let mut trial = state.clone();
             let mut h_trial = h;
             let target = u_s + step;
@@ -739,7 +734,7 @@ impl Indentation {
                 p_kpa,
                 settings,
                 &load_dofs,
-                &constraint,
+                (&constraint, 1.0),
                 target + apex_z0_mm,
             );
             match solved {
@@ -751,9 +746,7 @@ impl Indentation {
                     step = (step * 2.0).min(SNAP_US_STEP_MM);
                 }
                 Err(e) => {
-                    for (c, m) in self.model.contacts.iter_mut().zip(saved) {
-                        c.multipliers = m;
-                    }
+                    self.restore_multipliers(saved);
                     step *= 0.5;
                     if step < SNAP_US_STEP_MM / 64.0 {
                         if path.is_empty() || !by_arc_length {
@@ -840,43 +833,21 @@ impl Indentation {
             let t: Vec<(usize, f64)> = du.iter().map(|&(d, x)| (d, x / length)).collect();
             let t_h = dh / length;
             let target = t.iter().map(|&(d, w)| w * state[d]).sum::<f64>() + t_h * h + ds;
-            let saved: Vec<Vec<f64>> = self
-                .model
-                .contacts
-                .iter()
-                .map(|c| c.multipliers.clone())
-                .collect();
+            let saved = self.saved_multipliers();
             let mut trial = state.clone();
             for &(d, w) in &t {
                 trial[d] += ds * w;
             }
             let mut h_trial = h + ds * t_h;
-            let solved = self
-                .model
-                .solve_equilibrium_bordered(
-                    &mut trial,
-                    p_kpa,
-                    &mut h_trial,
-                    &load_dofs,
-                    &t,
-                    t_h,
-                    target,
-                )
-                .and_then(|_| {
-                    self.augment_contact(&mut trial, settings, &mut |ind, u| {
-                        ind.model
-                            .solve_equilibrium_bordered(
-                                u,
-                                p_kpa,
-                                &mut h_trial,
-                                &load_dofs,
-                                &t,
-                                t_h,
-                                target,
-                            )
-                            .map(|_| ())
-                    })
-                });
+            let solved = self.solve_bordered_step(
+                &mut trial,
+                &mut h_trial,
+                p_kpa,
+                settings,
+                &load_dofs,
+                (&t, t_h),
+                target,
+            );
             // a step that moves the apex or the tube much further than aimed at may have
             // jumped to another branch (the path bends sharply near the snap): taken back
             let u_s_now = h + state[apex_dof] - apex_z0_mm;
@@ -893,9 +864,7 @@ impl Indentation {
                     ds *= (ARC_MOVE_MM / moved.max(1e-12)).clamp(0.5, 2.0);
                 }
                 result => {
-                    for (c, m) in self.model.contacts.iter_mut().zip(saved) {
-                        c.multipliers = m;
-                    }
+                    self.restore_multipliers(saved);
                     failures += 1;
                     ds *= 0.5;
                     if failures > ARC_MAX_CUTS {
@@ -913,8 +882,9 @@ impl Indentation {
         })
     }
 
-    /// One step of the apex-controlled path: the bordered Newton solve, then Uzawa
-    /// augmentations as in [`Self::solve_step`].
+    /// One step of a path with the travel h as an unknown: the bordered Newton solve with
+    /// the constraint `constraint . u + constraint_h h = target`, then Uzawa augmentations
+    /// as in [`Self::solve_step`].
     #[allow(clippy::too_many_arguments)] // the bordered system's parts, each named
     fn solve_bordered_step(
         &mut self,
@@ -923,16 +893,46 @@ impl Indentation {
         p_kpa: f64,
         settings: &SolverSettings,
         load_dofs: &[(usize, f64)],
-        constraint: &[(usize, f64)],
+        (constraint, constraint_h): (&[(usize, f64)], f64),
         target: f64,
     ) -> Result<(), NewtonFailure> {
-        self.model
-            .solve_equilibrium_bordered(u, p_kpa, h, load_dofs, constraint, 1.0, target)?;
+        self.model.solve_equilibrium_bordered(
+            u,
+            p_kpa,
+            h,
+            load_dofs,
+            constraint,
+            constraint_h,
+            target,
+        )?;
         self.augment_contact(u, settings, &mut |ind, u| {
             ind.model
-                .solve_equilibrium_bordered(u, p_kpa, h, load_dofs, constraint, 1.0, target)
+                .solve_equilibrium_bordered(
+                    u,
+                    p_kpa,
+                    h,
+                    load_dofs,
+                    constraint,
+                    constraint_h,
+                    target,
+                )
                 .map(|_| ())
         })
+    }
+
+    /// The contact multipliers, to be put back after a failed step.
+    fn saved_multipliers(&self) -> Vec<Vec<f64>> {
+        self.model
+            .contacts
+            .iter()
+            .map(|c| c.multipliers.clone())
+            .collect()
+    }
+
+    fn restore_multipliers(&mut self, saved: Vec<Vec<f64>>) {
+        for (c, m) in self.model.contacts.iter_mut().zip(saved) {
+            c.multipliers = m;
+        }
     }
 
     /// The band of fine elements over the current radii `extent_mm` in the state `u`,

@@ -13,8 +13,10 @@
 //! offset and a manometer offset present from the start are removed by the bench's own
 //! calibrations (the rigid sweep, the vent-open zero), so for them `none` is the expected
 //! verdict; they run a second time with a stale calibration (`+stale`: the offsets appeared
-//! after the bench was calibrated), where the diagnosis should name them. A case whose
-//! truth cannot be solved is listed as not run.
+//! after the bench was calibrated), where the manometer's offset reaches the measurement
+//! and should be named; a constant proximity offset is still removed, by each
+//! indentation's own zero of u_s before contact. A case whose truth cannot be solved is
+//! listed as not run.
 //!
 //!     cargo run --release -p system-tests --example bench_path_diagnosis -- OUTDIR \
 //!         [--seeds N] [--null-seeds N] [--effects NAME,...] [--clear-only]
@@ -331,9 +333,10 @@ fn summary(results: &[CaseResult]) {
         // the bench's own calibrations remove these two instrument offsets: the rigid
         // sweep sees the proximity offset, the vent-open zero the manometer's
         let calibrated_out = match effect.as_str() {
-            "displacement_offset+stale" | "pressure_offset+stale" => {
-                " (a stale calibration: the offset reaches the measurement)"
+            "displacement_offset+stale" => {
+                " (a stale calibration, but each indentation zeroes u_s before contact: none expected)"
             }
+            "pressure_offset+stale" => " (a stale calibration: the offset reaches the measurement)",
             "displacement_offset" => {
                 " (removed by the rigid-sample proximity calibration: none expected)"
             }
