@@ -164,6 +164,10 @@ fn calibrate(scenario: &hil_sim::scenario::Scenario, pressures: &[f64]) -> Calib
     record.px_per_mm = Some(px.px_per_mm);
     record.px_per_mm_sigma = Some(px.px_per_mm_sigma);
     record.px_offset_px = px.offset_px;
+    record.lens_distortion_k_per_mm2 = px
+        .lens_distortion
+        .filter(|d| d.corrected)
+        .map(|d| d.k_per_mm2);
     record
 }
 

@@ -55,12 +55,13 @@ impl LoadedCalibration {
     }
 
     pub fn px_per_mm(&self) -> Option<PxPerMmCalibration> {
-        self.record.px_per_mm.map(|k| PxPerMmCalibration {
-            px_per_mm: k,
-            px_per_mm_sigma: self.record.px_per_mm_sigma.unwrap_or(0.0),
-            offset_px: self.record.px_offset_px,
-            samples: 0,
-            lens_distortion: None,
+        self.record.px_per_mm.map(|k| {
+            PxPerMmCalibration::stored(
+                k,
+                self.record.px_per_mm_sigma.unwrap_or(0.0),
+                self.record.px_offset_px,
+                self.record.lens_distortion_k_per_mm2,
+            )
         })
     }
 }
@@ -154,6 +155,10 @@ pub fn calibrate_sim(
     record.px_per_mm = Some(px.px_per_mm);
     record.px_per_mm_sigma = Some(px.px_per_mm_sigma);
     record.px_offset_px = px.offset_px;
+    record.lens_distortion_k_per_mm2 = px
+        .lens_distortion
+        .filter(|d| d.corrected)
+        .map(|d| d.k_per_mm2);
     let path = experiment::calibration::record::save_record(dir, &record)?;
     Ok(path
         .file_name()

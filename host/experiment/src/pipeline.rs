@@ -125,13 +125,12 @@ pub fn camera_timing(
 /// The camera scale stored in a calibration record.
 pub fn px_per_mm_of(calibration: &CalibrationRecord) -> Result<PxPerMmCalibration, RunError> {
     let px_per_mm = calibration.px_per_mm.ok_or(RunError::NoCameraScale)?;
-    Ok(PxPerMmCalibration {
+    Ok(PxPerMmCalibration::stored(
         px_per_mm,
-        px_per_mm_sigma: calibration.px_per_mm_sigma.unwrap_or(0.0),
-        offset_px: calibration.px_offset_px,
-        samples: 0,
-        lens_distortion: None,
-    })
+        calibration.px_per_mm_sigma.unwrap_or(0.0),
+        calibration.px_offset_px,
+        calibration.lens_distortion_k_per_mm2,
+    ))
 }
 
 /// Moves the stage to `target_mm` at `speed` and waits until it stops there.

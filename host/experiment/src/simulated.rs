@@ -595,6 +595,10 @@ pub fn run_demo_with(scenario: Scenario, options: &DemoOptions) -> Result<DemoRe
     calibration.px_per_mm = Some(px.px_per_mm);
     calibration.px_per_mm_sigma = Some(px.px_per_mm_sigma);
     calibration.px_offset_px = px.offset_px;
+    calibration.lens_distortion_k_per_mm2 = px
+        .lens_distortion
+        .filter(|d| d.corrected)
+        .map(|d| d.k_per_mm2);
     calibration.manometer_zero_kpa = manometer_zero;
     record.write_json("calibration.json", &calibration)?;
 

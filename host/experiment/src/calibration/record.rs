@@ -37,6 +37,11 @@ pub struct CalibrationRecord {
     /// Edge offset of the camera scale (r_px = px_per_mm r_mm + offset), when fitted.
     #[serde(default)]
     pub px_offset_px: Option<f64>,
+    /// The lens distortion k (1/mm^2) the reference discs showed and the radii are
+    /// corrected for: r_px = offset + px_per_mm r (1 + k r^2); absent when the discs were
+    /// consistent with a straight line (`vision::px_per_mm`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lens_distortion_k_per_mm2: Option<f64>,
     /// How late the camera's frames are stamped after their exposure (s), subtracted
     /// from their host times before pairing (`tactile calibrate camera-latency`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -60,6 +65,7 @@ impl CalibrationRecord {
             proximity_sweeps: Vec::new(),
             px_per_mm_sigma: None,
             px_offset_px: None,
+            lens_distortion_k_per_mm2: None,
             camera_latency_s: None,
         }
     }

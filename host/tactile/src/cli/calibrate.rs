@@ -278,6 +278,10 @@ fn calibrate(args: &CalibrateArgs) -> Result<(CalibrationRecord, Vec<String>), (
             r.px_per_mm = Some(cal.px_per_mm);
             r.px_per_mm_sigma = Some(cal.px_per_mm_sigma);
             r.px_offset_px = cal.offset_px;
+            r.lens_distortion_k_per_mm2 = cal
+                .lens_distortion
+                .filter(|d| d.corrected)
+                .map(|d| d.k_per_mm2);
             lines.push(format!(
                 "camera: {:.4} ± {:.4} px/mm{} from {} frame(s)",
                 cal.px_per_mm,
@@ -291,7 +295,7 @@ fn calibrate(args: &CalibrateArgs) -> Result<(CalibrationRecord, Vec<String>), (
                 let largest = samples.iter().map(|s| s.0).fold(0.0, f64::max);
                 lines.push(if d.significant() {
                     format!(
-                        "warning: the discs' radii are not proportional to their size: a lens distortion k = {:.2e} ± {:.1e} /mm² (a radius r is seen at r (1 + k r²); {:+.2} % at {largest} mm), which the px/mm scale cannot describe: contact radii away from the discs' are off by the difference",
+                        "camera: the discs' radii are not proportional to their size: a lens distortion k = {:.2e} ± {:.1e} /mm² (a radius r is seen at r (1 + k r²); {:+.2} % at {largest} mm); the scale and offset above are the fit with it, and measured radii are corrected for it (check the optics if it is larger than expected)",
                         d.k_per_mm2,
                         d.k_sigma_per_mm2,
                         100.0 * d.relative_at(largest)
