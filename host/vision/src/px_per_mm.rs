@@ -10,8 +10,10 @@
 //! scale. Four or more sizes also test the line itself: a radial lens distortion sees a
 //! radius r at r (1 + k r^2) (the first radial term of Brown's model, "Decentering
 //! distortion of lenses", 1966), so `r_px = b + s r + c r^3` is fitted by weighted least
-//! squares (weights 1/sigma^2 of each disc's measured radius) and k = c / s reported with
-//! its standard error ([`LensDistortion`]). A scale and an offset absorb such a distortion
+//! squares (weights 1/sigma^2 of each disc's measured radius, at least the edge estimator's
+//! systematic error) and k = c / s reported with its standard error ([`LensDistortion`]);
+//! when k is significant the calibration is the cubic's and
+//! [`PxPerMmCalibration::px_to_mm`] undoes the distortion. A scale and an offset absorb such a distortion
 //! over the radii a contact reaches, so the contact-radius curves alone cannot show it
 //! (docs/diagnosis.md, limitations); the discs can.
 
