@@ -103,10 +103,16 @@ pub struct LatencyEstimate {
 pub enum LatencyError {
     #[error(
         "no indentation has both a loading and an unloading branch with at least \
-         {MIN_BRANCH_POINTS} contact points over a common radius range; record a full \
-         indentation (in and out at the same speed) with the camera on"
+         {MIN_BRANCH_POINTS} contact points over a common radius range ({indentations} \
+         indentations; the fullest had {most_loading} loading and {most_unloading} unloading \
+         contact points in all); record a full indentation (in and out at the same speed) with \
+         the camera on, more slowly or at a higher frame rate"
     )]
-    NoUsableCycle,
+    NoUsableCycle {
+        indentations: usize,
+        most_loading: usize,
+        most_unloading: usize,
+    },
     #[error(
         "the stage speed in and out differs too little to time the frames (loading {v_load_mm_s:.3} mm/s, unloading {v_unload_mm_s:.3} mm/s)"
     )]
@@ -186,6 +192,7 @@ pub fn estimate_camera_latency(points: &[CurvePoint]) -> Result<LatencyEstimate,
     let mut per_cycle = Vec::new();
     let mut offsets = Vec::new();
     let mut last_speed_error = None;
+    let (indentations, mut most_loading, mut most_unloading) = (cycles.len(), 0, 0);
     for c in cycles {
         let branch = |phase: Phase| -> Vec<&CurvePoint> {
             points
@@ -195,6 +202,9 @@ pub fn estimate_camera_latency(points: &[CurvePoint]) -> Result<LatencyEstimate,
                 .collect()
         };
         let (load, unload) = (branch(Phase::Load), branch(Phase::Unload));
+        if load.len().min(unload.len()) >= most_loading.min(most_unloading) {
+            (most_loading, most_unloading) = (load.len(), unload.len());
+        }
         match cycle_latency(&load, &unload) {
             Ok(Some((tau, offset_mm))) => {
                 per_cycle.push(tau);
@@ -205,7 +215,11 @@ pub fn estimate_camera_latency(points: &[CurvePoint]) -> Result<LatencyEstimate,
         }
     }
     if per_cycle.is_empty() {
-        return Err(last_speed_error.unwrap_or(LatencyError::NoUsableCycle));
+        return Err(last_speed_error.unwrap_or(LatencyError::NoUsableCycle {
+            indentations,
+            most_loading,
+            most_unloading,
+        }));
     }
     Ok(LatencyEstimate {
         latency_s: median(&per_cycle),
@@ -434,13 +448,25 @@ mod tests {
             .into_iter()
             .filter(|p| p.phase == Phase::Load)
             .collect();
+        let loading = load_only
+            .iter()
+            .filter(|p| p.cycle == 0 && p.a_mm > 0.0)
+            .count();
         assert_eq!(
             estimate_camera_latency(&load_only),
-            Err(LatencyError::NoUsableCycle)
+            Err(LatencyError::NoUsableCycle {
+                indentations: 2,
+                most_loading: loading,
+                most_unloading: 0,
+            })
         );
         assert_eq!(
             estimate_camera_latency(&[]),
-            Err(LatencyError::NoUsableCycle)
+            Err(LatencyError::NoUsableCycle {
+                indentations: 0,
+                most_loading: 0,
+                most_unloading: 0,
+            })
         );
     }
 
