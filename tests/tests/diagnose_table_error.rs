@@ -126,6 +126,9 @@ fn loo_calibration() {
     });
     let (mut sd, mut sl, mut lag, mut lag0) = (0.0, 0.0, 0.0, 0.0);
     let mut z2 = Vec::new();
+    // truth minus table per (modulus, pressure) keyed by the load step's travel h (in
+    // 1e-6 mm): their correlation across the two pressures at equal h
+    let mut by_step: Vec<(f64, f64, i64, f64)> = Vec::new();
     for &e in &moduli {
         for p in [6.0, 15.0] {
             let c = solve_curve(&truth_params(e, p)).expect("measurement setup");
@@ -140,6 +143,7 @@ fn loo_calibration() {
                     continue;
                 }
                 let diff = q.a_mm - model.base.sample(e, p, q.u_s_mm).a_mm;
+                by_step.push((e, p, (q.h_mm * 1e6).round() as i64, diff));
                 // the knot nearest to the step (the knots are the steps' u_s interpolated
                 // between the nodes)
                 let Some(k) = (0..knots.len()).min_by(|&a, &b| {
@@ -176,6 +180,21 @@ fn loo_calibration() {
             );
         }
     }
+    let (mut s66, mut s77, mut s67) = (0.0, 0.0, 0.0);
+    for &(e, p, h, d) in by_step.iter().filter(|x| x.1 == 6.0) {
+        if let Some(&(_, _, _, d15)) = by_step
+            .iter()
+            .find(|x| x.0 == e && x.1 != p && x.2 == h)
+        {
+            s66 += d * d;
+            s77 += d15 * d15;
+            s67 += d * d15;
+        }
+    }
+    println!(
+        "correlation of truth - table between 6 and 15 kPa at equal travel: {:.2}",
+        s67 / (s66 * s77).sqrt().max(1e-30)
+    );
     z2.sort_by(f64::total_cmp);
     println!(
         "overall: RMS ratio truth-table / LOO = {:.3} (scale per modulus: lut_error_scale); lag-1 correlation of truth-table {:.2}; \
