@@ -182,10 +182,7 @@ fn loo_calibration() {
     }
     let (mut s66, mut s77, mut s67) = (0.0, 0.0, 0.0);
     for &(e, p, h, d) in by_step.iter().filter(|x| x.1 == 6.0) {
-        if let Some(&(_, _, _, d15)) = by_step
-            .iter()
-            .find(|x| x.0 == e && x.1 != p && x.2 == h)
-        {
+        if let Some(&(_, _, _, d15)) = by_step.iter().find(|x| x.0 == e && x.1 != p && x.2 == h) {
             s66 += d * d;
             s77 += d15 * d15;
             s67 += d * d15;
