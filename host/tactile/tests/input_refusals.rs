@@ -259,3 +259,42 @@ fn an_edge_band_with_friction_is_refused_before_solving() {
     assert!(stderr(&out).contains("--edge-band needs a frictionless curve"));
     assert!(!dir.join("curve.csv").exists());
 }
+
+#[test]
+fn a_curve_that_stops_early_keeps_its_converged_steps() {
+    // A point the solver does not pass (docs/fem.md, known limits: 146.8 kPa at 4.5 kPa on
+    // mesh level -2 stops at h = 1.821 mm); if the solver learns to pass it, this test
+    // needs another stopping curve.
+    let dir = scratch("stopped");
+    let out = tactile()
+        .args(["fem", "curve", "--modulus", "146.8", "--pressure", "4.5"])
+        .args([
+            "--mesh-level",
+            "-2",
+            "--steps",
+            "19",
+            "--depth",
+            "1.9",
+            "--out",
+        ])
+        .arg(dir.join("curve.csv"))
+        .output()
+        .unwrap();
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("stopped after h = 1.8000 mm of 1.9 mm") && err.contains("curve.csv"),
+        "{err}"
+    );
+    // the converged steps are written, marked as stopped, and read back as a curve
+    let csv = fit::curve_csv::read_curve_csv(&dir.join("curve.csv")).unwrap();
+    assert_eq!(csv.rows.len(), 19, "h = 0 .. 1.8 mm in 0.1 mm steps");
+    assert!(
+        csv.metadata
+            .iter()
+            .any(|(k, v)| k == "stopped" && v.contains("no convergence")),
+        "{:?}",
+        csv.metadata
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

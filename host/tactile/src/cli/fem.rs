@@ -179,9 +179,17 @@ fn curve(a: CurveArgs) -> ExitCode {
     if a.edge_band {
         simulation = simulation.with_edge_band();
     }
-    let solved = simulation.solve().and_then(|s| s.complete());
-    let curve = match solved {
-        Ok(c) => c,
+    let solved = simulation.solve().map(|s| (s.curve, s.stop));
+    let (curve, stop) = match solved {
+        Ok((c, fem_core::StopReason::Completed)) => (c, None),
+        // a curve that stops early keeps its converged steps: written, then reported
+        Ok((c, fem_core::StopReason::Stopped { at_h_mm, error })) if !c.points.is_empty() => {
+            (c, Some((at_h_mm, error)))
+        }
+        Ok((_, fem_core::StopReason::Stopped { error, .. })) => {
+            eprintln!("error: simulation failed: {error}");
+            return ExitCode::FAILURE;
+        }
         Err(e @ FemError::InvalidParameter { .. }) => {
             eprintln!("error: {e}");
             return ExitCode::from(2);
@@ -194,9 +202,30 @@ fn curve(a: CurveArgs) -> ExitCode {
     let band = a
         .edge_band
         .then_some(fem_core::edge_band::EdgeBand::CONVERGED);
-    if let Err(e) = write_curve_csv(&a.out, &curve_csv_of(&curve, band.as_ref())) {
+    let mut csv = curve_csv_of(&curve, band.as_ref());
+    if let Some((at_h_mm, error)) = &stop {
+        csv.metadata.push((
+            "stopped".to_string(),
+            format!(
+                "after h = {at_h_mm:.4} mm of {} mm: {error}",
+                params.max_depth_mm
+            ),
+        ));
+    }
+    if let Err(e) = write_curve_csv(&a.out, &csv) {
         eprintln!("error: {e}");
         return ExitCode::from(2);
+    }
+    if let Some((at_h_mm, error)) = stop {
+        eprintln!(
+            "error: simulation stopped after h = {at_h_mm:.4} mm of {} mm: {error}\n\
+             the {} converged points are in {} (its `# stopped:` line says so); more \
+             --steps or another --mesh-level may pass the point",
+            params.max_depth_mm,
+            curve.points.len(),
+            a.out.display()
+        );
+        return ExitCode::FAILURE;
     }
     let last = curve.points.last();
     eprintln!(
