@@ -341,4 +341,17 @@ fn truncated_curves_are_recorded_and_limit_the_queryable_range() {
     let (_, hi_soft) = slice.u_s_range_mm(150.0, 0.0).unwrap();
     let soft_last = *file.lut.curve(0).unwrap().u_s_mm.last().unwrap();
     assert!((hi_soft - soft_last).abs() < 1e-12);
+    // a query on the next pressure node reads only that node's curves, so the short curve
+    // does not limit its range, and the range agrees with what `sample` accepts
+    let (_, hi_at_6) = slice.u_s_range_mm(500.0, 6.0).unwrap();
+    assert!(hi_at_6 > 1.2 * last_u, "{hi_at_6} vs {last_u}");
+    let at_6 = LutQuery {
+        pressure_kpa: 6.0,
+        u_s_mm: 0.99 * hi_at_6,
+        ..q(0.0)
+    };
+    assert!(slice.sample(&at_6, OutOfRange::Error).is_ok());
+    // between the nodes it does
+    let (_, hi_at_3) = slice.u_s_range_mm(500.0, 3.0).unwrap();
+    assert!((hi_at_3 - last_u).abs() < 1e-12, "{hi_at_3} vs {last_u}");
 }

@@ -36,7 +36,7 @@ use diagnosis::simulate::{Hidden, SimSpec, sizes, truth_modulus_kpa, truth_scena
 use diagnosis::{DiagnoseOptions, diagnose};
 use experiment::record_meta::record_curve_at_set_pressure;
 use experiment::simulated::{DemoOptions, run_demo_with};
-use hil_sim::scenario::MechanicsSource;
+use hil_sim::scenario::{MechanicsSource, Scenario};
 
 const PRESSURES_KPA: [f64; 2] = [6.0, 15.0];
 const REPEATS: u32 = 5;
@@ -143,6 +143,7 @@ fn run_case(
         pressures_kpa.sort_by(f64::total_cmp);
     }
     let mut curves = Vec::new();
+    let mut truth_written = false;
     for p in PRESSURES_KPA {
         let record = dir.join(format!("record-{p}"));
         // a complete record of an earlier run is reused
@@ -151,6 +152,12 @@ fn run_case(
             continue;
         }
         let _ = std::fs::remove_dir_all(&record);
+        if !truth_written {
+            // the truth's curves (converged sample, coarse table-effect differences:
+            // `truth_curves`) run as a `curves` mechanics source
+            scenario.mechanics = write_truth_curves(&scenario, &dir.join("truth"))?;
+            truth_written = true;
+        }
         let options = DemoOptions {
             modulus_kpa: modulus,
             pressure_kpa: p,
@@ -356,4 +363,19 @@ fn summary(results: &[CaseResult]) {
             n = of.len()
         );
     }
+}
+
+/// Solves the truth of `scenario` (`diagnosis::simulate::truth_curves`), writes each curve
+/// as JSON into `dir` and returns the `curves` mechanics source that reads them.
+fn write_truth_curves(scenario: &Scenario, dir: &Path) -> Result<MechanicsSource, String> {
+    let curves = diagnosis::simulate::truth_curves(scenario).map_err(|e| e.to_string())?;
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let mut files = Vec::new();
+    for (k, c) in curves.iter().enumerate() {
+        let path = dir.join(format!("curve-{k}.json"));
+        let json = serde_json::to_string(c).map_err(|e| e.to_string())?;
+        std::fs::write(&path, json).map_err(|e| format!("{}: {e}", path.display()))?;
+        files.push(path);
+    }
+    Ok(MechanicsSource::Curves { files })
 }

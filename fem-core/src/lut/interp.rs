@@ -352,7 +352,7 @@ impl LutSlice<'_> {
         pressure_kpa: f64,
     ) -> Result<(f64, f64), LutError> {
         let mut clamped = false;
-        let (_, jp) = bracket(
+        let (p, jp) = bracket(
             "pressure_kpa",
             &self.lut.grid.pressure_kpa,
             pressure_kpa,
@@ -366,10 +366,18 @@ impl LutSlice<'_> {
             OutOfRange::Error,
             &mut clamped,
         )?;
-        let js: Vec<usize> = if self.lut.grid.pressure_kpa.len() == 1 {
+        // the pressure nodes `sample` reads (a node of weight 0, at a query on the other
+        // node, does not limit the range)
+        let pressures = &self.lut.grid.pressure_kpa;
+        let js: Vec<usize> = if pressures.len() == 1 {
             vec![0]
         } else {
-            vec![jp, jp + 1]
+            let w = (p - pressures[jp]) / (pressures[jp + 1] - pressures[jp]);
+            [(jp, 1.0 - w), (jp + 1, w)]
+                .into_iter()
+                .filter(|&(_, w)| w != 0.0)
+                .map(|(j, _)| j)
+                .collect()
         };
         let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
         for j in js {

@@ -47,6 +47,11 @@ pub struct Surface<'a> {
     slice: LutSlice<'a>,
     pressures: Vec<f64>,
     moduli: Vec<f64>,
+    /// A table dense in p_air (the effect tables' base slice, 1 kPa steps) that carries this
+    /// surface from its pressure nodes to the pressures between them: at p off a node,
+    /// a(p) = a_self(p_n) + a_ref(p) - a_ref(p_n) with p_n the nearest node, where the
+    /// reference covers both (see [`Surface::with_pressure_reference`]).
+    pressure_reference: Option<Box<Surface<'a>>>,
 }
 
 impl<'a> Surface<'a> {
@@ -58,7 +63,28 @@ impl<'a> Surface<'a> {
             slice: lut.slice(sel)?,
             pressures: lut.grid.pressure_kpa.clone(),
             moduli: lut.grid.modulus_kpa.clone(),
+            pressure_reference: None,
         })
+    }
+
+    /// This surface, read between its pressure nodes through the change of `reference`
+    /// (a table whose pressure steps are finer): a converged baseline solved at a few
+    /// pressures keeps its own values at them, while a manometer offset (a true pressure
+    /// 1-2 kPa off the set point) moves it as the dense table moves. Linear interpolation
+    /// between nodes 4-6 kPa apart would be far coarser than the offset it must resolve.
+    pub fn with_pressure_reference(mut self, reference: Surface<'a>) -> Self {
+        self.pressure_reference = Some(Box::new(reference));
+        self
+    }
+
+    /// Whether the pressure reference is used (the surface has one).
+    pub fn has_pressure_reference(&self) -> bool {
+        self.pressure_reference.is_some()
+    }
+
+    fn covers_pressure(&self, p: f64) -> bool {
+        let (lo, hi) = (self.pressures[0], self.pressures[self.pressures.len() - 1]);
+        p >= lo - 1e-9 && p <= hi + 1e-9
     }
 
     pub fn moduli_kpa(&self) -> &[f64] {
@@ -87,9 +113,36 @@ impl<'a> Surface<'a> {
         }
     }
 
-    /// The model at (E2, p_air, u_s); outside the table's pressures it is continued linearly
-    /// from the two nearest pressure nodes (the table's own interpolation is linear in p_air).
+    /// The model at (E2, p_air, u_s); between pressure nodes through the pressure reference
+    /// where there is one and it covers both p_air and the nearest node; otherwise outside
+    /// the table's pressures it is continued linearly from the two nearest pressure nodes
+    /// (the table's own interpolation is linear in p_air).
     pub fn sample(&self, e: f64, p: f64, u: f64) -> ModelSample {
+        if let Some(r) = &self.pressure_reference {
+            let node = self
+                .pressures
+                .iter()
+                .copied()
+                .min_by(|a, b| (a - p).abs().total_cmp(&(b - p).abs()));
+            if let Some(node) = node
+                && (p - node).abs() > 1e-9
+                && r.covers_pressure(p)
+                && r.covers_pressure(node)
+            {
+                let at_node = self.sample_own(e, node, u);
+                let (r1, r0) = (r.sample(e, p, u), r.sample(e, node, u));
+                return ModelSample {
+                    a_mm: at_node.a_mm + r1.a_mm - r0.a_mm,
+                    load_n: at_node.load_n + r1.load_n - r0.load_n,
+                    h_mm: at_node.h_mm + r1.h_mm - r0.h_mm,
+                };
+            }
+        }
+        self.sample_own(e, p, u)
+    }
+
+    /// The model from this surface's own table alone (see [`Surface::sample`]).
+    fn sample_own(&self, e: f64, p: f64, u: f64) -> ModelSample {
         let n = self.pressures.len();
         if n >= 2 && (p < self.pressures[0] || p > self.pressures[n - 1]) {
             let (p0, p1) = if p < self.pressures[0] {
@@ -196,10 +249,26 @@ pub struct Model<'a> {
 }
 
 impl<'a> Model<'a> {
+    /// The model of baseline `base` with the effect tables `effects`. When the baseline's
+    /// pressures are not the thickness table's (a converged baseline solved at a few
+    /// pressures), it is read between them through the thickness table's base slice
+    /// ([`Surface::with_pressure_reference`]), which has 1 kPa steps around the set points.
     pub fn new(base: &'a Lut, effects: &'a [EffectTable]) -> Result<Self, ModelError> {
         let base_lut = base;
-        let base = Surface::new(base, &fem_core::lut::EffectSelection::default())
+        let mut base = Surface::new(base, &fem_core::lut::EffectSelection::default())
             .map_err(ModelError::Baseline)?;
+        if let Some(t) = effects.iter().find(|t| t.axis == EffectAxis::Thickness)
+            && t.lut.grid.pressure_kpa != base_lut.grid.pressure_kpa
+        {
+            let reference =
+                Surface::new(&t.lut, &t.axis.select(t.axis.base_value())).map_err(|source| {
+                    ModelError::Effect {
+                        table: t.path.clone(),
+                        source,
+                    }
+                })?;
+            base = base.with_pressure_reference(reference);
+        }
         let axes = effects
             .iter()
             .map(AxisSurfaces::new)

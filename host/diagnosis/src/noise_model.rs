@@ -28,7 +28,7 @@
 //! ([`Model::step_knots_mm`]), joined by chords between knots (as the curve is read between
 //! steps): e(u_s) = sum_k h_k(u_s) e_k with hat functions h_k, covariance
 //! sum_k h_k(u_i) h_k(u_j) sigma_k^2. sigma_k is the leave-one-out PCHIP error across the
-//! modulus nodes next to the estimate at u_k, scaled by [`lut_error_scale`] (calibrated
+//! modulus nodes next to the estimate at u_k, scaled by [`table_error_scale`] (calibrated
 //! against direct solves between the nodes). Along u_s the table's PCHIP differs from the
 //! chord through the steps by |PCHIP - chord| ([`Model::u_interpolation_error`]), a
 //! term fully correlated within one step interval and independent between intervals.
@@ -87,6 +87,46 @@ pub fn lut_error_scale(e: f64) -> f64 {
     KNOTS[KNOTS.len() - 1].1
 }
 
+/// The table-error scale of a converged baseline (a table solved with the band of fine
+/// elements at the contact edge, `default-fine.lut`): its node curves have no element-scale
+/// wiggles, so a curve solved between the nodes differs from the interpolated table by far
+/// less than the leave-one-out error at twice the spacing. Measured by converged solves at
+/// the geometric midpoints between the modulus nodes 17.8-825 kPa at 6 and 15 kPa
+/// (`loo_calibration` with `DIAG_CONVERGED=1` in `tests/tests/diagnose_table_error.rs`):
+/// truth minus table 0.3-1.1 um RMS per curve, 3.5 um at 56 kPa and 6 kPa; the ratio to the
+/// leave-one-out error 0.07-0.24, 0.40 at 562 kPa and 0.41 at 56 kPa (6 kPa), with no trend in
+/// the modulus. One scale, an envelope over the largest ratios with a tenth of margin. On
+/// stiff samples the leave-one-out error vanishes (0.6 um at 825 kPa, 6 kPa) while the
+/// converged solves keep their own path dependence (1.0 um there: a ratio of 1.5), hence
+/// the floor [`CONVERGED_LUT_ERROR_FLOOR_MM`] added in quadrature.
+pub const CONVERGED_LUT_ERROR_SCALE: f64 = 0.45;
+
+/// The floor of a converged baseline's table error in a (mm), added in quadrature to the
+/// scaled leave-one-out error: above the largest truth-minus-table RMS measured where the
+/// leave-one-out error is small (0.3-1.1 um; see [`CONVERGED_LUT_ERROR_SCALE`]).
+pub const CONVERGED_LUT_ERROR_FLOOR_MM: f64 = 0.0012;
+
+/// The table-error scale for the model's baseline at modulus `e`: [`lut_error_scale`] for a
+/// coarse table, [`CONVERGED_LUT_ERROR_SCALE`] for one solved with the edge band.
+pub fn table_error_scale(model: &Model<'_>, e: f64) -> f64 {
+    if model.base_lut.edge_band.is_some() {
+        CONVERGED_LUT_ERROR_SCALE
+    } else {
+        lut_error_scale(e)
+    }
+}
+
+/// The table error's standard deviation at a load-step knot whose leave-one-out error is
+/// `loo`: scaled ([`table_error_scale`]) and, for a converged baseline's contact radius,
+/// with its floor ([`CONVERGED_LUT_ERROR_FLOOR_MM`]) in quadrature.
+pub fn table_error_sigma(model: &Model<'_>, channel: Channel, e: f64, loo: f64) -> f64 {
+    let floor = match channel {
+        Channel::Radius if model.base_lut.edge_band.is_some() => CONVERGED_LUT_ERROR_FLOOR_MM,
+        _ => 0.0,
+    };
+    (table_error_scale(model, e) * loo).hypot(floor)
+}
+
 /// Noise parameters at one pressure.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct PressureNoise {
@@ -119,7 +159,16 @@ pub struct NoiseModel {
     lut: Vec<LutTerm>,
     /// Knot standard deviations of the table error across E2, per pressure.
     knot_sigma: Vec<(f64, Vec<f64>)>,
+    /// The converged baseline's own discretisation error (standard deviation, correlation
+    /// length along u_s; mm): common to every replicate at a pressure; zero for a coarse
+    /// baseline, whose table term already dwarfs it.
+    continuum: (f64, f64),
 }
+
+/// Correlation length along u_s of the converged model's discretisation error (mm): it
+/// changes as the contact edge crosses the band's elements and the mesh outside the band,
+/// smoothly over a few tenths of a millimetre of travel.
+pub const CONTINUUM_ERROR_LENGTH_MM: f64 = 0.5;
 
 fn bins_of(us: &[f64], k: usize) -> Vec<usize> {
     let lo = us.iter().copied().fold(f64::INFINITY, f64::min);
@@ -225,8 +274,10 @@ fn lut_terms(
     let mut knots_at: Vec<(f64, Vec<f64>, Vec<f64>)> = Vec::new();
     for p in super::data::pressures(points) {
         let (u, loo) = table_error_knots_of(model, channel, e, p);
-        let scale = lut_error_scale(e);
-        let sigma = loo.iter().map(|l| scale * l).collect();
+        let sigma = loo
+            .iter()
+            .map(|&l| table_error_sigma(model, channel, e, l))
+            .collect();
         knots_at.push((p, u, sigma));
     }
     let terms = points
@@ -310,11 +361,21 @@ impl NoiseModel {
                 ..pn
             });
         }
+        // a real sample has no mesh: the converged model's own error in a (its measured
+        // RMS, fem_core::discretisation::EDGE_BAND) is part of what the data may differ by
+        let continuum = match channel {
+            Channel::Radius if model.base_lut.edge_band.is_some() => (
+                fem_core::discretisation::EDGE_BAND.rms_um * 1e-3,
+                CONTINUUM_ERROR_LENGTH_MM,
+            ),
+            _ => (0.0, 1.0),
+        };
         Self {
             pressures,
             slope,
             lut,
             knot_sigma,
+            continuum,
         }
     }
 
@@ -370,6 +431,10 @@ impl NoiseModel {
             .find(|k| k.0 == a.p_air_kpa)
             .map_or(&[][..], |k| &k.1[..]);
         let mut c = lut_covariance(&self.lut[i], &self.lut[j], ks, false);
+        let (s_cont, l_cont) = self.continuum;
+        if s_cont > 0.0 {
+            c += s_cont * s_cont * (-du / l_cont).exp();
+        }
         if a.test == b.test {
             c += n.test_offset_a_mm.powi(2)
                 + n.test_offset_u_mm.powi(2) * self.slope[i] * self.slope[j]

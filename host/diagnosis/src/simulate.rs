@@ -1,8 +1,9 @@
 //! Hidden-effect data for tests and the confusion matrix, from hil-sim's plant in simulated
-//! time: the contact mechanics are hil-sim's (`mechanics_source::build_mechanics`: direct
-//! fem-core solves at the sample's true parameters — a real thinner layer, real friction,
-//! the Yeoh stiffening law — at the truth's off-grid modulus and true internal pressure),
-//! the history and measurement effects are hil-sim's own code (`effects::EffectState` for
+//! time: the contact mechanics are direct fem-core solves at the sample's true parameters
+//! ([`truth_curves`]: a converged solve of the sample at the truth's off-grid modulus and
+//! true internal pressure, plus a real thinner layer, real friction or the Yeoh
+//! stiffening law as the difference of two coarse solves) read by hil-sim's curve
+//! mechanics; the history and measurement effects are hil-sim's own code (`effects::EffectState` for
 //! viscoelastic relaxation and adhesion, `EffectsConfig::camera_radius_mm` and
 //! `proximity_error_mm` for the camera and proximity effects).
 //!
@@ -24,15 +25,23 @@ use hil_sim::scenario::{MechanicsSource, Scenario};
 use super::candidates::EffectKind;
 use super::data::Point;
 use super::tables::{EFFECT_MAX_DEPTH_MM, EFFECT_MESH_LEVEL};
+use fem_core::{Curve, CurveParams};
 
-/// Load steps of the truth solves: the tables' step of 0.1 mm of tube travel (mesh level
-/// and steps must match, or the difference shows up as structure), to 1.9 mm (the ramp
-/// goes to 1.8 mm; the last 0.1 mm of the tables is where thin or soft samples can stop
-/// converging).
-pub const TRUTH_STEPS: usize = super::tables::EFFECT_STEPS - 1;
+/// Mesh level of the truth's sample: the production mesh with the band of fine elements
+/// that follows the contact edge (`fem_core::Simulation::with_edge_band`), whose contact
+/// radius is converged to about a micrometre — the settings of the converged baseline
+/// (`default-fine.lut`) but solved at the truth's exact modulus and pressure, so the
+/// diagnosis sees the table's interpolation, not a shared mesh.
+pub const TRUTH_MESH_LEVEL: i32 = 0;
+/// Load steps of the truth solves: the converged table's step of 0.05 mm of tube travel, to
+/// 1.9 mm (the ramp goes to 1.8 mm; the last 0.1 mm of the tables is where thin or soft
+/// samples can stop converging).
+pub const TRUTH_STEPS: usize = 38;
 /// Final tube travel of the truth solves.
-pub const TRUTH_MAX_DEPTH_MM: f64 =
-    EFFECT_MAX_DEPTH_MM * (TRUTH_STEPS as f64) / (super::tables::EFFECT_STEPS as f64);
+pub const TRUTH_MAX_DEPTH_MM: f64 = 1.9;
+/// Load steps of the coarse solves whose difference carries a physical table effect
+/// (thinner sample, friction, stiffening) into the truth: the effect tables' settings.
+const EFFECT_TRUTH_STEPS: usize = super::tables::EFFECT_STEPS - 1;
 
 /// The hidden effect of a simulation (never given to the diagnosis).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -202,10 +211,10 @@ pub fn truth_scenario(spec: &SimSpec) -> Scenario {
     s.mechanics = MechanicsSource::Solve {
         pressures_kpa: pressures,
         modulus_factors: factors,
-        mesh_level: EFFECT_MESH_LEVEL,
+        mesh_level: TRUTH_MESH_LEVEL,
         steps: TRUTH_STEPS,
         max_depth_mm: TRUTH_MAX_DEPTH_MM,
-        edge_band: false,
+        edge_band: true,
     };
     s
 }
@@ -248,7 +257,7 @@ pub enum TruthError {
 }
 
 /// The truth mechanics of a scenario (the expensive part: fem-core solves, each kept up to
-/// its last converged step, [`fem_core::StopReason`]).
+/// its last converged step, [`fem_core::StopReason`]; see [`truth_curves`]).
 pub fn truth_mechanics(scenario: &Scenario) -> Result<Truth, TruthError> {
     if !matches!(scenario.mechanics, MechanicsSource::Solve { .. }) {
         let mechanics = hil_sim::mechanics_source::build_mechanics(scenario)?;
@@ -257,20 +266,11 @@ pub fn truth_mechanics(scenario: &Scenario) -> Result<Truth, TruthError> {
             reached_travel_mm: f64::INFINITY,
         });
     }
-    let mut curves = Vec::new();
-    let mut reached = f64::INFINITY;
-    for params in hil_sim::mechanics_source::solve_params(scenario) {
-        let curve = fem_core::Simulation::new(&params)
-            .solve()
-            .map_err(|source| TruthError::Solve {
-                modulus_kpa: params.sample_modulus_kpa,
-                pressure_kpa: params.pressure_kpa,
-                source,
-            })?
-            .curve;
-        reached = reached.min(curve.points.last().map_or(0.0, |q| q.h_mm));
-        curves.push(curve);
-    }
+    let curves = truth_curves(scenario)?;
+    let reached = curves
+        .iter()
+        .map(|c| c.points.last().map_or(0.0, |q| q.h_mm))
+        .fold(f64::INFINITY, f64::min);
     let mechanics = hil_sim::mechanics::CurveMechanics::new(&curves)?;
     if scenario.effects.needs_modulus_axis() && !mechanics.has_modulus_axis() {
         return Err(TruthError::ViscoelasticNeedsModulusAxis);
@@ -279,6 +279,114 @@ pub fn truth_mechanics(scenario: &Scenario) -> Result<Truth, TruthError> {
         mechanics: Box::new(mechanics),
         reached_travel_mm: reached,
     })
+}
+
+/// The truth's curves for a `solve` mechanics source (empty for other sources), in
+/// hil-sim's modulus-major order; they can be saved as JSON and run as a `curves` source.
+///
+/// The sample's elastic response is the converged solve (mesh level
+/// [`TRUTH_MESH_LEVEL`] with the edge band) of the 7 mm frictionless neo-Hookean sample at
+/// the exact modulus and pressure. A physical table effect (a thinner sample, friction,
+/// Yeoh stiffening) is added as the difference of two solves at the effect tables' mesh
+/// and steps, with and without it, at equal tube travel: the edge band is for
+/// frictionless samples, and a friction solve on the converged mesh would take minutes.
+/// The diagnosis reads its effects as the same kind of difference (its tables' slices
+/// minus their base), so a table effect is tested at its discretisation, while the
+/// sample it acts on has none.
+pub fn truth_curves(scenario: &Scenario) -> Result<Vec<Curve>, TruthError> {
+    let solve = |params: &CurveParams, edge_band: bool| -> Result<Curve, TruthError> {
+        let simulation = fem_core::Simulation::new(params);
+        let simulation = if edge_band {
+            simulation.with_edge_band()
+        } else {
+            simulation
+        };
+        Ok(simulation
+            .solve()
+            .map_err(|source| TruthError::Solve {
+                modulus_kpa: params.sample_modulus_kpa,
+                pressure_kpa: params.pressure_kpa,
+                source,
+            })?
+            .curve)
+    };
+    let plain_sample = hil_sim::scenario::SampleConfig::default();
+    let mut out = Vec::new();
+    for params in hil_sim::mechanics_source::solve_params(scenario) {
+        let plain = CurveParams {
+            sample_thickness_mm: plain_sample.thickness_mm,
+            friction: 0.0,
+            material: plain_sample.law,
+            sample_stiffening: 0.0,
+            ..params.clone()
+        };
+        let sample = solve(&plain, true)?;
+        if plain == params {
+            out.push(sample);
+            continue;
+        }
+        let coarse = |p: &CurveParams| CurveParams {
+            mesh_level: EFFECT_MESH_LEVEL,
+            steps: EFFECT_TRUTH_STEPS,
+            max_depth_mm: EFFECT_MAX_DEPTH_MM * EFFECT_TRUTH_STEPS as f64
+                / super::tables::EFFECT_STEPS as f64,
+            ..p.clone()
+        };
+        let with_effect = solve(&coarse(&params), false)?;
+        let without = solve(&coarse(&plain), false)?;
+        out.push(with_table_effect(sample, &with_effect, &without, params));
+    }
+    Ok(out)
+}
+
+/// `sample` plus (`with_effect` - `without`) in u_s, a and the load at equal tube travel
+/// (linear between the coarse steps), up to the travel all three reach; labelled with the
+/// true sample's parameters.
+fn with_table_effect(
+    sample: Curve,
+    with_effect: &Curve,
+    without: &Curve,
+    params: CurveParams,
+) -> Curve {
+    let at = |c: &Curve, h: f64| -> Option<(f64, f64, f64)> {
+        let k = c.points.partition_point(|q| q.h_mm < h);
+        if k == c.points.len() {
+            let last = c.points.last()?;
+            return ((h - last.h_mm).abs() < 1e-9).then_some((last.u_s_mm, last.a_mm, last.load_n));
+        }
+        let q1 = &c.points[k];
+        if k == 0 {
+            return Some((q1.u_s_mm, q1.a_mm, q1.load_n));
+        }
+        let q0 = &c.points[k - 1];
+        let w = (h - q0.h_mm) / (q1.h_mm - q0.h_mm);
+        let lerp = |x: f64, y: f64| x + w * (y - x);
+        Some((
+            lerp(q0.u_s_mm, q1.u_s_mm),
+            lerp(q0.a_mm, q1.a_mm),
+            lerp(q0.load_n, q1.load_n),
+        ))
+    };
+    let mut curve = sample;
+    let mut points = Vec::with_capacity(curve.points.len());
+    for q in curve.points.drain(..) {
+        let (Some(e), Some(b)) = (at(with_effect, q.h_mm), at(without, q.h_mm)) else {
+            break;
+        };
+        let mut q = q;
+        q.u_s_mm += e.0 - b.0;
+        // no contact stays no contact; a contact the effect shrinks below zero ends at zero
+        q.a_mm = if q.a_mm > 0.0 {
+            (q.a_mm + e.1 - b.1).max(0.0)
+        } else {
+            0.0
+        };
+        q.load_n += e.2 - b.2;
+        points.push(q);
+    }
+    curve.points = points;
+    curve.params = params;
+    curve
 }
 
 /// Simulates the experiment with prebuilt mechanics of `truth_scenario(spec)`.

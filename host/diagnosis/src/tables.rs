@@ -232,23 +232,44 @@ pub fn read_effect_table(path: &Path) -> Result<EffectTable, TableError> {
     })
 }
 
-/// The shipped effect tables (`fem-core/data/effects-*.lut`) and the baseline: the base
-/// slice of the first (the thickness table), which has the effect tables' mesh and steps.
+/// The shipped effect tables (`fem-core/data/effects-*.lut`) and the baseline: the
+/// converged table (`default-fine.lut`, [`converged_baseline`]).
 pub fn shipped_tables() -> Result<(Lut, Vec<EffectTable>), TableError> {
     let effects = EffectAxis::ALL
         .iter()
         .map(|a| read_effect_table(&shipped_tables_dir().join(a.file_name())))
         .collect::<Result<Vec<_>, _>>()?;
+    Ok((converged_baseline()?, effects))
+}
+
+/// The diagnosis's baseline: the converged table (`fem-core/data/default-fine.lut`: the
+/// production grid solved with the band of fine elements at the contact edge, mesh level 0,
+/// 40 steps), so that what the diagnosis calls a disagreement is not the mesh of its own
+/// model. The effects are read from the coarse effect tables as changes from their base
+/// slice ([`super::model::AxisSurfaces::delta`]), and pressures between the converged
+/// table's nodes through the thickness table's 1 kPa steps
+/// ([`super::model::Surface::with_pressure_reference`]).
+pub fn converged_baseline() -> Result<Lut, TableError> {
+    let path = fem_core::shipped::fine_lut_path();
+    fem_core::lut::read_lut(&path)
+        .map(|f| f.lut)
+        .map_err(|e| TableError::Read {
+            path: path.display().to_string(),
+            reason: e.to_string(),
+        })
+}
+
+/// The effect tables' base slice (mesh level -2, 20 steps; the coarse baseline the
+/// diagnosis used before the converged one), for studies of the coarse model itself.
+pub fn coarse_baseline(effects: &[EffectTable]) -> Result<Lut, TableError> {
     let t = effects.first().ok_or(TableError::Read {
         path: shipped_tables_dir().display().to_string(),
         reason: "no effect tables".into(),
     })?;
-    let base =
-        sub_table(&t.lut, &t.axis.select(t.axis.base_value())).map_err(|e| TableError::Slice {
-            path: t.path.clone(),
-            reason: e.to_string(),
-        })?;
-    Ok((base, effects))
+    sub_table(&t.lut, &t.axis.select(t.axis.base_value())).map_err(|e| TableError::Slice {
+        path: t.path.clone(),
+        reason: e.to_string(),
+    })
 }
 
 /// A complete one-slice table cut out of `lut` at the effect selection `sel` (every other

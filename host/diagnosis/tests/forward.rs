@@ -131,11 +131,11 @@ fn friction_and_a_camera_scale_are_both_named() {
 
 #[test]
 fn a_second_effect_below_its_detectable_size_is_not_named() {
-    // 2 um of displacement offset, half the minimum detectable offset at this noise (4.3 um:
+    // 1 um of displacement offset, half the minimum detectable offset at this noise (2.0 um:
     // the report's minimum detectable size, 80 % power at the threshold, on the clean data
-    // of `clean_data_names_nothing`); measured: its step-2 refit gain 2.7 vs threshold 6.6
+    // of `clean_data_names_nothing`, with the converged baseline's small table-error term)
     let thin = (EffectKind::FiniteThickness, 1.5);
-    let d = run(&[thin, (EffectKind::DisplacementOffset, 0.002)], 23);
+    let d = run(&[thin, (EffectKind::DisplacementOffset, 0.001)], 23);
     assert_eq!(names(&d), vec!["finite_thickness".to_string()]);
     assert_eq!(
         d.forward.stop.verdict,

@@ -9,7 +9,7 @@
 
 use clap::Args;
 use diagnosis::tables::{
-    EffectAxis, EffectTable, build_effect_table, read_effect_table, shipped_tables_dir, sub_table,
+    EffectAxis, EffectTable, build_effect_table, read_effect_table, shipped_tables_dir,
 };
 use diagnosis::{DiagnoseOptions, data, diagnose, report};
 use std::path::{Path, PathBuf};
@@ -31,8 +31,8 @@ pub struct DiagnoseArgs {
     /// --simulate: the simulated curve CSV).
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Baseline table (default: the base slice of the effect tables, which match the
-    /// simulated bench's mesh; a table at another mesh level shows up as structure).
+    /// Baseline table (default: the converged table fem-core/data/default-fine.lut; the
+    /// effects are read from their tables as changes from the tables' base slice).
     #[arg(long)]
     pub lut: Option<PathBuf>,
     /// Effect tables (repeatable; default fem-core/data/effects-{thickness,friction,stiffening}.lut).
@@ -211,16 +211,17 @@ fn load_tables(args: &DiagnoseArgs) -> Result<Tables, String> {
             (f.lut, format!("{} (sha256 {})", p.display(), f.sha256))
         }
         None => {
-            let t = effects.first().ok_or(
-                "no effect tables found (build them with tactile diagnose --build-tables fem-core/data) and no --lut given",
-            )?;
-            let sel = t.axis.select(t.axis.base_value());
-            let lut = sub_table(&t.lut, &sel).map_err(|e| format!("{}: {e}", t.path))?;
+            if effects.is_empty() {
+                return Err("no effect tables found (build them with tactile diagnose --build-tables fem-core/data) and no --lut given".into());
+            }
+            let p = fem_core::shipped::fine_lut_path();
+            let f = fem_core::lut::read_lut(&p).map_err(|e| format!("{}: {e}", p.display()))?;
             (
-                lut,
+                f.lut,
                 format!(
-                    "base slice of {} (same mesh and steps as the effect tables)",
-                    t.path
+                    "{} (sha256 {}; the converged table, the effects read from their tables as changes from the base slice)",
+                    p.display(),
+                    f.sha256
                 ),
             )
         }
