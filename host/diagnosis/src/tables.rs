@@ -1,8 +1,9 @@
 //! The effect tables the diagnosis reads: fem-core lookup tables over modulus x pressure with
-//! one varied effect axis each (sample thickness, friction, strain stiffening), at the mesh
-//! level and load steps of the mechanics the simulated bench uses for its truth, so that a
-//! mesh difference never shows up as structure. The baseline table is the slice of any of
-//! them at the axis' base value.
+//! one varied effect axis each (sample thickness, friction, strain stiffening), on a coarse
+//! mesh (level -2). The diagnosis reads them only as changes from their base slice (the
+//! slice at the axis' base value), added to the converged baseline
+//! ([`converged_baseline`]); the simulated truth adds its table effects the same way
+//! (`simulate::truth_curves`), so that their mesh never shows up as structure.
 //!
 //! Building them reuses fem-core's builder ([`fem_core::lut::build_lut`]) on the grids of
 //! [`effect_grids`]; [`sub_table`] cuts a one-slice table out of a multi-slice one so the
@@ -13,7 +14,7 @@ use std::path::{Path, PathBuf};
 use fem_core::CurveParams;
 use fem_core::lut::{EffectSelection, GridIndex, Lut, LutCurve, LutGrid, log_spaced};
 
-/// Mesh level of the shipped effect tables and of the simulated truth in the tests.
+/// Mesh level of the shipped effect tables (and of the simulated truth's table effects).
 pub const EFFECT_MESH_LEVEL: i32 = -2;
 /// Load steps per curve (to `EFFECT_MAX_DEPTH_MM`).
 pub const EFFECT_STEPS: usize = 20;
@@ -21,9 +22,9 @@ pub const EFFECT_STEPS: usize = 20;
 pub const EFFECT_MAX_DEPTH_MM: f64 = 2.0;
 /// Internal pressures of the effect tables.
 pub const EFFECT_PRESSURES_KPA: [f64; 2] = [6.0, 15.0];
-/// Internal pressures of the thickness table, whose base slice is the baseline: 1 kPa steps
-/// to +-2 kPa around the set points, so that the pressure-offset candidate reads the
-/// baseline at p_air - p0 inside the table. a(p_air) is far from linear there: continuing
+/// Internal pressures of the thickness table, whose base slice carries the baseline between
+/// its pressure nodes: 1 kPa steps to +-2 kPa around the set points, so that the
+/// pressure-offset candidate reads the baseline at p_air - p0 inside the table. a(p_air) is far from linear there: continuing
 /// the 6-15 kPa chord to 4.5 kPa missed a direct solve by 0.019 mm RMS at 170 kPa, about
 /// the size of the 1.5 kPa effect itself (`tests/tests/diagnose_table_error.rs`).
 pub const BASE_PRESSURES_KPA: [f64; 10] = [4.0, 5.0, 6.0, 7.0, 8.0, 13.0, 14.0, 15.0, 16.0, 17.0];
