@@ -318,7 +318,13 @@ fn pressure_continuation_error() {
             // the E2 interpolation error dominates (4.5 kPa: 0.0147 mm, worst at the last two
             // steps near the table's u_s end), which `truth_minus_table_per_step` bounds and
             // the noise model carries: printed, not asserted here.
-            if e == 146.8 && rms_err >= 0.1 * rms_eff {
+            // With the converged baseline (`DIAG_CONVERGED=1`) the change from the set point
+            // comes from the coarse thickness table, whose a(p_air) slope is not the
+            // converged one: measured 0.011 / 0.0034 / 0.0016 / 0.0011 mm against effects of
+            // 0.042 / 0.018 / 0.0071 / 0.0059 mm (0.19-0.26 of the effect) at 146.8 kPa; the
+            // bound guards that share (a manometer offset is then read about a fifth off).
+            let share = if converged { 0.35 } else { 0.1 };
+            if e == 146.8 && rms_err >= share * rms_eff {
                 failures.push(format!(
                     "E2 {e} p {p_true}: {rms_err:.4} vs effect {rms_eff:.4} mm"
                 ));
