@@ -15,8 +15,8 @@
 use diagnosis::model::Surface;
 use diagnosis::simulate::{TRUTH_MAX_DEPTH_MM, TRUTH_MESH_LEVEL, TRUTH_STEPS};
 use diagnosis::tables::{
-    EFFECT_MAX_DEPTH_MM, EFFECT_STEPS, EffectAxis, converged_baseline, effect_base_params,
-    read_effect_table, shipped_tables_dir, sub_table,
+    EFFECT_MAX_DEPTH_MM, EFFECT_STEPS, EffectAxis, coarse_baseline, converged_baseline,
+    effect_base_params, read_effect_table, shipped_tables_dir,
 };
 use fem_core::{Curve, CurveParams, solve_curve};
 
@@ -93,7 +93,7 @@ fn compare(base: &Surface<'_>, e: f64, p: f64) -> f64 {
 fn truth_minus_table_per_step() {
     let t = read_effect_table(&tables_dir().join(EffectAxis::Thickness.file_name()))
         .expect("measurement setup");
-    let lut = sub_table(&t.lut, &t.axis.select(t.axis.base_value())).expect("measurement setup");
+    let lut = coarse_baseline(std::slice::from_ref(&t)).expect("measurement setup");
     let base =
         Surface::new(&lut, &fem_core::lut::EffectSelection::default()).expect("measurement setup");
     // staleness: at a table node the interpolation in E2 is exact, so a direct solve must
@@ -138,7 +138,7 @@ fn loo_calibration() {
     let lut = if converged {
         converged_baseline().expect("measurement setup")
     } else {
-        sub_table(&t.lut, &t.axis.select(t.axis.base_value())).expect("measurement setup")
+        coarse_baseline(std::slice::from_ref(&t)).expect("measurement setup")
     };
     let model = Model::new(&lut, &[]).expect("measurement setup");
     let nodes = lut.grid.modulus_kpa.clone();
@@ -275,7 +275,7 @@ fn pressure_continuation_error() {
     let lut = if converged {
         converged_baseline().expect("measurement setup")
     } else {
-        sub_table(&t.lut, &t.axis.select(t.axis.base_value())).expect("measurement setup")
+        coarse_baseline(std::slice::from_ref(&t)).expect("measurement setup")
     };
     let effects = [t.clone()];
     let model = Model::new(&lut, &effects).expect("measurement setup");

@@ -493,3 +493,70 @@ pub fn to_curve_csv(points: &[Point], note: &str) -> Result<String, fit::curve_c
     };
     fit::curve_csv::format_curve_csv(&curve)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A curve of `n` steps of `dh` mm: u_s = 0.5 h, a = 2 h (0 at h = 0), load = 0.1 h.
+    fn curve(n: usize, dh: f64, shift: f64) -> Curve {
+        Curve {
+            params: CurveParams::default(),
+            rest_volume_mm3: 0.0,
+            inflated_volume_mm3: 0.0,
+            inflation_apex_mm: 0.0,
+            points: (0..=n)
+                .map(|k| {
+                    let h = k as f64 * dh;
+                    fem_core::CurvePoint {
+                        h_mm: h,
+                        u_s_mm: 0.5 * h + shift,
+                        a_mm: if k == 0 { 0.0 } else { 2.0 * h + shift },
+                        load_n: 0.1 * h + shift,
+                        volume_mm3: 0.0,
+                        contact_pressure: Vec::new(),
+                    }
+                })
+                .collect(),
+            solve_seconds: 0.0,
+        }
+    }
+
+    #[test]
+    fn a_table_effect_is_added_at_equal_travel_up_to_the_shortest_curve() {
+        // fine sample: 0.05 mm steps to 1.0 mm; coarse pair: 0.1 mm steps, the effect curve
+        // 0.01 above the plain one in every quantity and ending at 0.8 mm
+        let sample = curve(20, 0.05, 0.0);
+        let mut with_effect = curve(10, 0.1, 0.01);
+        with_effect.points.truncate(9); // h = 0 .. 0.8 mm
+        let without = curve(10, 0.1, 0.0);
+        let params = CurveParams {
+            friction: 0.3,
+            ..CurveParams::default()
+        };
+        let c = with_table_effect(sample.clone(), &with_effect, &without, params.clone());
+        assert_eq!(c.params, params);
+        // ends where the effect curve ends (h = 0.8 mm: 17 fine steps from 0)
+        assert_eq!(c.points.len(), 17);
+        assert!((c.points[16].h_mm - 0.8).abs() < 1e-12);
+        for (q, s) in c.points.iter().zip(&sample.points) {
+            assert_eq!(q.h_mm, s.h_mm);
+            assert!((q.u_s_mm - (s.u_s_mm + 0.01)).abs() < 1e-12);
+            assert!((q.load_n - (s.load_n + 0.01)).abs() < 1e-12);
+            if s.a_mm == 0.0 {
+                // no contact in the sample stays no contact
+                assert_eq!(q.a_mm, 0.0);
+            } else {
+                // between coarse steps the delta is interpolated linearly: the coarse
+                // curves' a differ by 0.01 except at h = 0 (both 0), so at h = 0.05 the
+                // delta is half of it
+                let delta = if (s.h_mm - 0.05).abs() < 1e-12 {
+                    0.005
+                } else {
+                    0.01
+                };
+                assert!((q.a_mm - (s.a_mm + delta)).abs() < 1e-12, "h {}", s.h_mm);
+            }
+        }
+    }
+}
