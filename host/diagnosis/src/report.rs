@@ -257,8 +257,11 @@ pub fn text(d: &Diagnosis) -> String {
     forward_text(&mut s, d);
     let _ = writeln!(
         s,
-        "\n{} points used, {} outside the table's u_s range; {:.2} s",
-        d.points_used, d.points_excluded, d.seconds
+        "\n{} points used, {} outside the table's u_s range or below {} mm of u_s; {:.2} s",
+        d.points_used,
+        d.points_excluded,
+        super::MIN_APEX_DISPLACEMENT_MM,
+        d.seconds
     );
     for n in &d.notes {
         let _ = writeln!(s, "note: {n}");
