@@ -4,7 +4,8 @@
 //! 1 (if the true rate were 5 %, P(>= 2 of 6) = 3.3 %); the full check (>= 100 seeds,
 //! <= 5 %) is
 //! `cargo test --release -p system-tests --test diagnose_null -- --ignored --nocapture`
-//! (measured 4 of 100 at 170 kPa; soft samples exceed it: docs/diagnosis.md, Limitations).
+//! (measured 4 of 100 at 170 kPa, 4 at 25 kPa; 20 and 60 kPa exceed it: docs/diagnosis.md,
+//! Limitations).
 //! `NULL_SEEDS=N` runs the long check on fewer seeds (it then reports and fails, since the
 //! criterion needs >= 100); `NULL_MODULUS_KPA=E` at another true modulus (default 170);
 //! `NULL_WITHOUT_LOADS=1` drops the loads (the selection then reads the radius alone);
