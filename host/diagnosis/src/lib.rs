@@ -760,8 +760,8 @@ mod usable_tests {
         // kept whole
         let next: Vec<usize> = (0..points.len())
             .filter(|&i| {
-                let u = points[i].u_s_mm;
-                u >= MIN_APEX_DISPLACEMENT_MM && u <= MIN_APEX_DISPLACEMENT_MM + 0.1
+                (MIN_APEX_DISPLACEMENT_MM..=MIN_APEX_DISPLACEMENT_MM + 0.1)
+                    .contains(&points[i].u_s_mm)
             })
             .collect();
         assert!(next.len() > 10 && next.iter().all(|i| used.contains(i)));
