@@ -228,7 +228,9 @@ pub struct LoadPlot {
 /// whose shell takes little of the travel, these points are a sixth of the curve and their
 /// misread noise made the selection name effects that are not there: on clean data at
 /// 25 kPa (`diagnose_null`, `NULL_MODULUS_KPA=25`, 100 seeds) 14 of 100 with every point,
-/// 4 of 100 without those below 0.04 mm. Stiff samples lose a few points of 2 mm.
+/// 4 of 100 without those below 0.04 mm. At 170 kPa the table's range margin already leaves
+/// them out (the friction example of docs/diagnosis.md uses the same 500 of 540 points
+/// with and without this limit).
 pub const MIN_APEX_DISPLACEMENT_MM: f64 = 0.04;
 
 /// The points inside the baseline table's u_s range around modulus `e` (a margin of 3 %
