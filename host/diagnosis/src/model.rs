@@ -124,10 +124,10 @@ impl<'a> Surface<'a> {
 
     /// Whether p_air lies below this surface's first inflated pressure node (between a
     /// deflated node at 0 kPa and the next), where its own linear interpolation in p_air is
-    /// poor: the shell's shape changes fastest as it first inflates (against converged
-    /// solves at 170 kPa, u_s 0.1-1.6 mm: the chord between 0 and 6 kPa misses a at 4 kPa by
-    /// 55 um RMS, at 600 kPa by 250 um), while between inflated nodes 4-10 kPa apart the
-    /// chord is within about 1 um (8, 13 and 17 kPa at 170 and 600 kPa).
+    /// poor: against converged solves at 4 kPa the chord between 0 and 6 kPa is within 2 um
+    /// up to u_s 1 mm, then 30-680 um off where the deflated shell gives way (55 um RMS over
+    /// u_s 0.1-1.6 mm at 170 kPa, 250 um at 600 kPa), while between inflated nodes 4-10 kPa
+    /// apart the chord is within about 1 um (8, 13 and 17 kPa at 170 and 600 kPa).
     fn below_first_inflated_node(&self, p: f64) -> bool {
         match self.pressures.iter().position(|&q| q > 0.0) {
             Some(k) => p < self.pressures[k] - 1e-9,
@@ -308,8 +308,9 @@ pub struct Model<'a> {
 impl<'a> Model<'a> {
     /// The model of baseline `base` with the effect tables `effects`. When the baseline's
     /// pressures are not the thickness table's (a converged baseline solved at a few
-    /// pressures), it is read between them through the thickness table's base slice
-    /// ([`Surface::with_pressure_reference`]), which has 1 kPa steps around the set points.
+    /// pressures), it is read below its first inflated node through the thickness table's
+    /// base slice ([`Surface::with_pressure_reference`]), which has 1 kPa steps around the
+    /// set points.
     pub fn new(base: &'a Lut, effects: &'a [EffectTable]) -> Result<Self, ModelError> {
         let base_lut = base;
         let mut base = Surface::new(base, &fem_core::lut::EffectSelection::default())

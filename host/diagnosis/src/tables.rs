@@ -247,8 +247,8 @@ pub fn shipped_tables() -> Result<(Lut, Vec<EffectTable>), TableError> {
 /// production grid solved with the band of fine elements at the contact edge, mesh level 0,
 /// 40 steps), so that what the diagnosis calls a disagreement is not the mesh of its own
 /// model. The effects are read from the coarse effect tables as changes from their base
-/// slice ([`super::model::AxisSurfaces::delta`]), and pressures between the converged
-/// table's nodes through the thickness table's 1 kPa steps
+/// slice ([`super::model::AxisSurfaces::delta`]), and pressures below the converged
+/// table's first inflated node through the thickness table's 1 kPa steps
 /// ([`super::model::Surface::with_pressure_reference`]).
 pub fn converged_baseline() -> Result<Lut, TableError> {
     let path = fem_core::shipped::fine_lut_path();
