@@ -191,7 +191,7 @@ fn a_thinner_sample_with_a_displacement_offset_names_both() {
 // The camera scale is named first (0.039, absorbing friction's radius signature too); at
 // step 2 friction passes on the radius (a gain of 23 against the step's threshold of 7.4)
 // and on both channels (joint chi2 935 against 7.4) (docs/diagnosis.md, Method, step 7).
-#[ignore = "friction solves; run with --release -- --ignored --nocapture"]
+#[ignore = "friction solves, about 70 s in release; cargo test --release -p system-tests --test diagnose_hidden_effects friction_with -- --ignored --nocapture"]
 fn friction_with_a_camera_scale_names_both() {
     check_pair(
         Hidden {

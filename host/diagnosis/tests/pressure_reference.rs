@@ -10,7 +10,7 @@ use diagnosis::tables::{EffectAxis, shipped_tables};
 use fem_core::lut::EffectSelection;
 
 #[test]
-fn the_converged_baseline_moves_between_its_pressure_nodes_as_the_dense_table_does() {
+fn below_its_first_inflated_node_the_converged_baseline_moves_as_the_dense_table_does() {
     let (base, effects) = shipped_tables().expect("shipped tables");
     let model = Model::new(&base, &effects).expect("model");
     assert!(model.base.has_pressure_reference());
