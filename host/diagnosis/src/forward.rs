@@ -36,6 +36,8 @@ use super::signatures::{self, Signature, Whitening};
 use super::verdict::{self, Decision, Verdict};
 use super::{DiagnoseOptions, GapSummary, stats};
 
+/// Seed offset of the replicate resampling threshold's draws.
+const REPLICATE_THRESHOLD_SEED: u64 = 0x5EED_0F_7E57;
 /// Seed offset of the joint threshold's bootstrap (independent of the radius one's draws).
 const JOINT_THRESHOLD_SEED: u64 = 0x6a6f_696e;
 
@@ -76,12 +78,23 @@ pub fn step(
     // and the joint fit of both channels that ranks the candidates)
     let load = LoadChannel::new(model, points, subset, prelim.base.modulus_kpa)
         .map(|lc| lc.with_joint(model, noise, points, subset, prelim.base.modulus_kpa));
-    let threshold = selection::bootstrap_threshold(
+    let gaussian = selection::bootstrap_threshold(
         &prelim.sigs,
         whitener.len(),
         options.bootstrap,
         options.seed,
     );
+    // the larger of the Gaussian draws' threshold and the replicates' own (selection.rs)
+    let threshold = selection::replicate_threshold(
+        &prelim.sigs,
+        points,
+        &prelim.base.residuals_mm,
+        whitener,
+        options.bootstrap,
+        options.seed ^ REPLICATE_THRESHOLD_SEED,
+    )
+    .filter(|r| r.delta_chi2_95 > gaussian.delta_chi2_95)
+    .unwrap_or(gaussian);
     let t95 = threshold.delta_chi2_95;
     // after an effect is added, a candidate may also pass by its gain in the fit to both
     // channels, against that gain's own calibrated threshold: the same bootstrap on the
