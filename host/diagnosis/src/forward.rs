@@ -37,7 +37,7 @@ use super::verdict::{self, Decision, Verdict};
 use super::{DiagnoseOptions, GapSummary, stats};
 
 /// Seed offset of the replicate resampling threshold's draws.
-const REPLICATE_THRESHOLD_SEED: u64 = 0x5EED_0F_7E57;
+const REPLICATE_THRESHOLD_SEED: u64 = 0x005E_ED0F_7E57;
 /// Seed offset of the joint threshold's bootstrap (independent of the radius one's draws).
 const JOINT_THRESHOLD_SEED: u64 = 0x6a6f_696e;
 

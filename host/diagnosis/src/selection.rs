@@ -159,9 +159,8 @@ fn replicate_deviations(
                             .iter()
                             .enumerate()
                             .filter(|(m, _)| *m != j)
-                            .filter_map(|(_, s)| {
-                                (k >= s[0].0 && k <= s[s.len() - 1].0).then(|| read_series(s, k))
-                            })
+                            .filter(|(_, s)| k >= s[0].0 && k <= s[s.len() - 1].0)
+                            .map(|(_, s)| read_series(s, k))
                             .collect();
                         let n = others.len() as f64;
                         let d = if others.is_empty() {
