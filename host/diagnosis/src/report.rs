@@ -162,9 +162,14 @@ pub fn text(d: &Diagnosis) -> String {
     }
     let _ = writeln!(
         s,
-        "\ncandidates (chi2 improvements; threshold: 95th percentile of the largest null improvement = {:.2}, {} bootstrap draws; ranked by {}):",
+        "\ncandidates (chi2 improvements; threshold: 95th percentile of the largest null improvement = {:.2}, {} {}; ranked by {}):",
         d.threshold.delta_chi2_95,
         d.threshold.replicates,
+        if d.threshold.null_draws == "replicates" {
+            "draws of the indentations' own deviations"
+        } else {
+            "bootstrap draws"
+        },
         if d.candidates.iter().any(|c| c.joint_fit.is_some()) {
             "the joint fit of the radius and the load"
         } else if d.load_channel.is_some() {

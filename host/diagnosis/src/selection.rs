@@ -7,7 +7,12 @@
 //!    score on them, so the null distribution of the largest improvement any candidate gets
 //!    is simulated from B draws z ~ N(0, I) and its 95th percentile is the threshold
 //!    (Efron & Tibshirani 1993, ch. 6: parametric bootstrap; the max over candidates takes
-//!    the multiple comparisons into account).
+//!    the multiple comparisons into account). The noise model is estimated from a few
+//!    replicates and misses part of the noise's structure (on soft samples a smooth drift of
+//!    u_s that enters a through a steep slope), so the same maximum is also drawn from the
+//!    replicates themselves ([`replicate_threshold`]: each test's deviation from the other
+//!    tests, resampled over the tests with random signs, whitened like the data); the
+//!    threshold is the larger of the two.
 //! 3. Held-out check: the candidate must predict data it was not fitted to better than the
 //!    baseline: fit on one pressure and predict the other (both ways), or with one pressure
 //!    fit the shallow half of u_s and predict the deep half (and back). A candidate that only
@@ -40,6 +45,9 @@ use super::stats::{Gauss, quantile};
 #[derive(Debug, Clone, Serialize)]
 pub struct Threshold {
     pub replicates: usize,
+    /// What the null draws were: `gaussian` (z ~ N(0, I)) or `replicates` (the
+    /// indentations' own deviations, [`replicate_threshold`]).
+    pub null_draws: &'static str,
     /// 95th percentile of the largest null improvement.
     pub delta_chi2_95: f64,
     pub delta_chi2_99: f64,
@@ -58,6 +66,7 @@ pub fn bootstrap_threshold(sigs: &[Signature], n: usize, b: usize, seed: u64) ->
         maxima.push(m);
     }
     Threshold {
+        null_draws: "gaussian",
         replicates: b,
         delta_chi2_95: quantile(&maxima, 0.95),
         delta_chi2_99: quantile(&maxima, 0.99),
@@ -101,6 +110,7 @@ pub fn replicate_threshold(
         maxima.push(sigs.iter().map(|s| s.score(&z)).fold(0.0, f64::max));
     }
     Some(Threshold {
+        null_draws: "replicates",
         replicates: b,
         delta_chi2_95: quantile(&maxima, 0.95),
         delta_chi2_99: quantile(&maxima, 0.99),
