@@ -97,8 +97,9 @@ pub fn replicate_threshold(
     let mut maxima = Vec::with_capacity(b);
     let mut v = vec![0.0; points.len()];
     for _ in 0..b {
-        for (tests, dev) in &series {
-            for (_, own) in tests {
+        for at in &series {
+            let dev = &at.deviations;
+            for own in &at.points_of_test {
                 let k = ((g.uniform() * dev.len() as f64) as usize).min(dev.len() - 1);
                 let sign = if g.uniform() < 0.5 { -1.0 } else { 1.0 };
                 for &(i, key) in own {
@@ -117,17 +118,22 @@ pub fn replicate_threshold(
     })
 }
 
-/// Per pressure: the tests with their points (index, key) and every test's deviation series
-/// (key, deviation) sorted by key; the key is the frame time where every point has one, else
-/// u_s. A deviation is the residual minus the mean of the other tests' residuals read at
+/// The replicates at one pressure, per test: its points (index, key) and its deviation
+/// series (key, deviation) sorted by key.
+struct PressureReplicates {
+    points_of_test: Vec<Vec<(usize, f64)>>,
+    deviations: Vec<Vec<(f64, f64)>>,
+}
+
+/// The replicates at every pressure ([`PressureReplicates`]); the key is the frame time
+/// where every point has one, else u_s. A deviation is the residual minus the mean of the other tests' residuals read at
 /// the same key (linear between their points; tests that do not reach it left out), scaled
 /// by 1/sqrt(1 + 1/k) for the k tests averaged, so that it has the noise's own variance.
-#[allow(clippy::type_complexity)]
 fn replicate_deviations(
     points: &[Point],
     r: &[f64],
     order: &[usize],
-) -> Option<Vec<(Vec<(u32, Vec<(usize, f64)>)>, Vec<Vec<(f64, f64)>>)>> {
+) -> Option<Vec<PressureReplicates>> {
     let in_time = order.iter().all(|&i| points[i].t_s.is_some());
     let key = |i: usize| {
         if in_time {
@@ -183,7 +189,10 @@ fn replicate_deviations(
                     .collect()
             })
             .collect();
-        out.push((tests, dev));
+        out.push(PressureReplicates {
+            points_of_test: tests.into_iter().map(|t| t.1).collect(),
+            deviations: dev,
+        });
     }
     Some(out)
 }
@@ -703,7 +712,12 @@ mod tests {
         let with = replicate_deviations(&points, &r_common, &order).expect("five tests");
         // the same noise with and without a common structure 20 times its size: identical
         // deviations up to rounding
-        for (a, b) in plain[0].1.iter().flatten().zip(with[0].1.iter().flatten()) {
+        for (a, b) in plain[0]
+            .deviations
+            .iter()
+            .flatten()
+            .zip(with[0].deviations.iter().flatten())
+        {
             assert!((a.1 - b.1).abs() < 1e-12, "{a:?} vs {b:?}");
         }
     }
@@ -713,7 +727,7 @@ mod tests {
         let order: Vec<usize> = (0..points.len()).collect();
         let dev = replicate_deviations(&points, &r, &order).expect("five tests");
         let d = dev[0]
-            .1
+            .deviations
             .iter()
             .map(|s| s.iter().map(|v| v.1).collect())
             .collect();
