@@ -83,7 +83,7 @@ fn clean_data_rarely_names_an_effect() {
 }
 
 #[test]
-#[ignore = "100 diagnoses (40 s in release); run with --release -- --ignored --nocapture"]
+#[ignore = "100 diagnoses, about 2-4 min in release; cargo test --release -p system-tests --test diagnose_null -- --ignored --nocapture"]
 fn false_positive_rate_over_100_seeds_is_at_most_5_percent() {
     let seeds: u64 = std::env::var("NULL_SEEDS")
         .ok()
