@@ -7,8 +7,8 @@
 //!
 //! `cargo test --release -p system-tests --test diagnose_table_error -- --ignored --nocapture`
 //! (`DIAG_TABLES=DIR` reads the tables from DIR instead of the shipped ones, e.g. tables
-//! rebuilt with `tactile diagnose --build-tables DIR`). These measure the coarse effect
-//! tables' base slice against coarse solves; `loo_calibration` with `DIAG_CONVERGED=1`
+//! rebuilt with `tactile diagnose --build-tables DIR`). These measure the effect tables'
+//! base slice (production mesh, no edge band) against solves at its settings; `loo_calibration` with `DIAG_CONVERGED=1`
 //! measures the diagnosis's converged baseline (`default-fine.lut`) against converged
 //! solves (the edge band), as the simulated truth is made.
 
@@ -20,8 +20,8 @@ use diagnosis::tables::{
 };
 use fem_core::{Curve, CurveParams, solve_curve};
 
-/// Steps of the coarse truths: the effect tables' 0.1 mm of travel, to 1.9 mm.
-const COARSE_TRUTH_STEPS: usize = EFFECT_STEPS - 1;
+/// Steps of the truths at the effect tables' settings: their 0.05 mm of travel, to 1.95 mm.
+const COARSE_TRUTH_STEPS: usize = EFFECT_STEPS - 1; // the thickness table's
 
 fn tables_dir() -> std::path::PathBuf {
     std::env::var("DIAG_TABLES")

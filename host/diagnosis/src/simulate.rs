@@ -2,8 +2,8 @@
 //! time: the contact mechanics are direct fem-core solves at the sample's true parameters
 //! ([`truth_curves`]: a converged solve of the sample at the truth's off-grid modulus and
 //! true internal pressure, plus a real thinner layer, real friction or the Yeoh
-//! stiffening law as the difference of two coarse solves) read by hil-sim's curve
-//! mechanics; the history and measurement effects are hil-sim's own code (`effects::EffectState` for
+//! stiffening law as the difference of two solves at the effect tables' settings) read by
+//! hil-sim's curve mechanics; the history and measurement effects are hil-sim's own code (`effects::EffectState` for
 //! viscoelastic relaxation and adhesion, `EffectsConfig::camera_radius_mm` and
 //! `proximity_error_mm` for the camera and proximity effects).
 //!
@@ -24,7 +24,7 @@ use hil_sim::scenario::{MechanicsSource, Scenario};
 
 use super::candidates::EffectKind;
 use super::data::Point;
-use super::tables::{EFFECT_MAX_DEPTH_MM, EFFECT_MESH_LEVEL};
+use super::tables::{EFFECT_MAX_DEPTH_MM, EffectAxis};
 use fem_core::{Curve, CurveParams};
 
 /// Mesh level of the truth's sample: the production mesh with the band of fine elements
@@ -39,9 +39,6 @@ pub const TRUTH_MESH_LEVEL: i32 = 0;
 pub const TRUTH_STEPS: usize = 38;
 /// Final tube travel of the truth solves.
 pub const TRUTH_MAX_DEPTH_MM: f64 = 1.9;
-/// Load steps of the coarse solves whose difference carries a physical table effect
-/// (thinner sample, friction, stiffening) into the truth: the effect tables' settings.
-const EFFECT_TRUTH_STEPS: usize = super::tables::EFFECT_STEPS - 1;
 
 /// The hidden effect of a simulation (never given to the diagnosis).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -325,22 +322,31 @@ pub fn truth_curves(scenario: &Scenario) -> Result<Vec<Curve>, TruthError> {
             out.push(sample);
             continue;
         }
-        let coarse = |p: &CurveParams| CurveParams {
-            mesh_level: EFFECT_MESH_LEVEL,
-            steps: EFFECT_TRUTH_STEPS,
-            max_depth_mm: EFFECT_MAX_DEPTH_MM * EFFECT_TRUTH_STEPS as f64
-                / super::tables::EFFECT_STEPS as f64,
+        // the two solves at the settings of the table that holds the effect (its mesh level
+        // and step), to one step short of its last travel
+        let axis = if params.friction != 0.0 {
+            EffectAxis::Friction
+        } else if params.sample_stiffening != 0.0 {
+            EffectAxis::Stiffening
+        } else {
+            EffectAxis::Thickness
+        };
+        let steps = axis.steps() - 1;
+        let at_table_settings = |p: &CurveParams| CurveParams {
+            mesh_level: axis.mesh_level(),
+            steps,
+            max_depth_mm: EFFECT_MAX_DEPTH_MM * steps as f64 / axis.steps() as f64,
             ..p.clone()
         };
-        let with_effect = solve(&coarse(&params), false)?;
-        let without = solve(&coarse(&plain), false)?;
+        let with_effect = solve(&at_table_settings(&params), false)?;
+        let without = solve(&at_table_settings(&plain), false)?;
         out.push(with_table_effect(sample, &with_effect, &without, params));
     }
     Ok(out)
 }
 
 /// `sample` plus (`with_effect` - `without`) in u_s, a and the load at equal tube travel
-/// (linear between the coarse steps), up to the travel all three reach; labelled with the
+/// (linear between their steps), up to the travel all three reach; labelled with the
 /// true sample's parameters.
 fn with_table_effect(
     sample: Curve,

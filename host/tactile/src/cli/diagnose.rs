@@ -47,7 +47,7 @@ pub struct DiagnoseArgs {
     /// Seed of the bootstrap and confidence simulations (and of --simulate).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Build the effect tables into this directory (fem-core, mesh level -2) and exit.
+    /// Build the effect tables into this directory (fem-core, production mesh) and exit.
     #[arg(long, value_name = "DIR")]
     pub build_tables: Option<PathBuf>,
     /// With --build-tables: only these (thickness, friction, stiffening).

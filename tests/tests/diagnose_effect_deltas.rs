@@ -1,0 +1,122 @@
+//! How well the effect tables carry an effect: the diagnosis adds an effect to its converged
+//! baseline as the table's change from its base slice at equal (E2, p_air, u_s), so what
+//! matters is the error of that change, not of the contact radius itself. Here the shipped
+//! tables' change is read at a modulus node (no interpolation across E2) and compared with
+//! the same change between two converged solves (the band of fine elements at the contact
+//! edge, `fem_core::Simulation::with_edge_band`), which stand for a sample without a mesh.
+//!
+//! `cargo test --release -p system-tests --test diagnose_effect_deltas -- --ignored --nocapture`
+//! (`DIAG_TABLES=DIR` reads the tables from DIR, e.g. tables rebuilt with
+//! `tactile diagnose --build-tables DIR`). Friction has no converged solve (the band is
+//! for frictionless curves) and is not measured here.
+
+use diagnosis::model::Surface;
+use diagnosis::simulate::{TRUTH_MAX_DEPTH_MM, TRUTH_MESH_LEVEL, TRUTH_STEPS};
+use diagnosis::tables::{EffectAxis, effect_base_params, read_effect_table, shipped_tables_dir};
+use fem_core::{Curve, CurveParams};
+
+fn tables_dir() -> std::path::PathBuf {
+    std::env::var("DIAG_TABLES")
+        .map(Into::into)
+        .unwrap_or_else(|_| shipped_tables_dir())
+}
+
+/// A converged solve (the simulated truth's settings) with `effect` applied to the base
+/// parameters.
+fn converged(e: f64, p: f64, effect: impl Fn(&mut CurveParams)) -> Curve {
+    let mut params = CurveParams {
+        sample_modulus_kpa: e,
+        pressure_kpa: p,
+        steps: TRUTH_STEPS,
+        max_depth_mm: TRUTH_MAX_DEPTH_MM,
+        mesh_level: TRUTH_MESH_LEVEL,
+        ..effect_base_params()
+    };
+    effect(&mut params);
+    fem_core::Simulation::new(&params)
+        .with_edge_band()
+        .solve()
+        .expect("measurement setup")
+        .curve
+}
+
+/// a(u_s) of a curve, linear between its steps (None outside them or before contact).
+fn a_at(c: &Curve, u: f64) -> Option<f64> {
+    let pts: Vec<_> = c.points.iter().filter(|q| q.a_mm > 0.0).collect();
+    let k = pts.partition_point(|q| q.u_s_mm < u);
+    if k == 0 || k == pts.len() {
+        return None;
+    }
+    let (q0, q1) = (pts[k - 1], pts[k]);
+    let t = (u - q0.u_s_mm) / (q1.u_s_mm - q0.u_s_mm);
+    Some(q0.a_mm + t * (q1.a_mm - q0.a_mm))
+}
+
+/// RMS of (table change - converged change) (um; printed with the largest) over u_s from 0.2 mm in 0.05 mm
+/// steps, where both converged curves and the table reach.
+fn delta_error(axis: EffectAxis, value: f64, e: f64, p: f64) -> f64 {
+    let t = read_effect_table(&tables_dir().join(axis.file_name())).expect("measurement setup");
+    let base = Surface::new(&t.lut, &axis.select(axis.base_value())).expect("measurement setup");
+    let with = Surface::new(&t.lut, &axis.select(value)).expect("measurement setup");
+    let set = |c: &mut CurveParams| match axis {
+        EffectAxis::Thickness => c.sample_thickness_mm = value,
+        EffectAxis::Stiffening => c.sample_stiffening = value,
+        EffectAxis::Friction => c.friction = value,
+    };
+    let (plain, effect) = (converged(e, p, |_| {}), converged(e, p, set));
+    let (Some((lo0, hi0)), Some((lo1, hi1))) = (base.u_s_range_mm(e, p), with.u_s_range_mm(e, p))
+    else {
+        panic!("measurement setup: no table curve at {e} kPa, {p} kPa");
+    };
+    let (lo, hi) = (lo0.max(lo1).max(0.2), hi0.min(hi1));
+    let (mut sum2, mut worst, mut largest_change, mut n) = (0.0, 0.0f64, 0.0f64, 0);
+    let mut u = lo;
+    while u <= hi + 1e-12 {
+        if let (Some(a1), Some(a0)) = (a_at(&effect, u), a_at(&plain, u)) {
+            let converged_change = a1 - a0;
+            let table_change = with.sample(e, p, u).a_mm - base.sample(e, p, u).a_mm;
+            let d = (table_change - converged_change) * 1e3;
+            sum2 += d * d;
+            worst = worst.max(d.abs());
+            largest_change = largest_change.max(converged_change.abs() * 1e3);
+            n += 1;
+        }
+        u += 0.05;
+    }
+    assert!(n >= 5, "measurement setup: {n} points at {e} kPa, {p} kPa");
+    let rms = (sum2 / n as f64).sqrt();
+    println!(
+        "{axis:?} {value} at E2 {e} kPa, p_air {p} kPa: the effect moves a by up to {largest_change:.1} um; \
+         table change - converged change over {n} points: RMS {rms:.1} um, largest {worst:.1} um"
+    );
+    rms
+}
+
+#[test]
+#[ignore = "measurement (10 converged fem-core solves, about 3 min in release); cargo test --release -p system-tests --test diagnose_effect_deltas -- --ignored --nocapture"]
+fn the_tables_change_agrees_with_converged_solves() {
+    // a table node each (no interpolation across E2); a mid-range and a soft sample, the
+    // thickness at the two pressures the bench uses
+    let cases = [
+        (EffectAxis::Thickness, 5.5, 146.8, 6.0),
+        (EffectAxis::Thickness, 3.5, 146.8, 6.0),
+        (EffectAxis::Thickness, 3.5, 146.8, 15.0),
+        (EffectAxis::Stiffening, 5.0, 46.42, 6.0),
+    ];
+    let mut failed = Vec::new();
+    for (axis, value, e, p) in cases {
+        let rms = delta_error(axis, value, e, p);
+        // measured: the production-mesh tables (mesh level 0) 3.7, 3.9, 3.5 and 2.4 um RMS in
+        // these four cases (about the converged solves' own scatter, 1-2 um, plus the
+        // production mesh's step-to-step scatter of the contact edge, which no longer
+        // cancels between two solves); the mesh level -2 tables 5.2, 13.7, 14.1 and 19.3 um.
+        // The white noise of one measured point is about 4 um: 4.5 um RMS passes the first
+        // and fails every case of the second.
+        if rms > 4.5 {
+            failed.push(format!(
+                "{axis:?} {value} at {e} kPa, {p} kPa: RMS {rms:.1} um"
+            ));
+        }
+    }
+    assert!(failed.is_empty(), "{failed:?}");
+}
