@@ -319,14 +319,16 @@ fn pressure_continuation_error() {
             // steps near the table's u_s end), which `truth_minus_table_per_step` bounds and
             // the noise model carries: printed, not asserted here.
             // With the converged baseline (`DIAG_CONVERGED=1`): below 6 kPa (the first
-            // inflated node) the change from the set point comes from the coarse thickness
-            // table, averaged along u_s, whose a(p_air) slope is not the converged one
-            // (measured 0.0136 / 0.0022 mm against effects of 0.042 / 0.0071 mm at 4.5 / 5.5
-            // kPa, 0.32 and 0.31 of the effect; 1-3 um up to u_s 1.4 mm, the rest beyond the
-            // 6 kPa curve's end); between 10 and 15 kPa it is the converged table's own chord
-            // (0.0008 / 0.0003 mm against 0.018 / 0.0059 mm at 13.5 / 14.5 kPa, 0.04-0.05 of
-            // the effect). The bounds guard those shares.
-            let share = if converged && p_true < 6.0 { 0.35 } else { 0.1 };
+            // inflated node) the change from the set point comes from the thickness table
+            // (production mesh), averaged along u_s. At 4.5 kPa it is within 1.4 um of the
+            // converged change up to u_s 1.4 mm (the mesh level -2 table: 0.8-3.7 um); beyond,
+            // where the 4.5 kPa shell starts to give way (u_s 1.42-1.71 mm), it misses by
+            // +5 to +52 um (level -2: +2.5 to +41), which sets the RMS: 0.0194 mm against
+            // an effect of 0.042 mm, 0.46 of it (level -2: 0.0136 mm, 0.32). Between 10 and
+            // 15 kPa it is the converged table's own chord (0.0008 / 0.0003 mm against
+            // 0.018 / 0.0059 mm at 13.5 / 14.5 kPa, 0.04-0.05 of the effect). The bounds
+            // guard those shares.
+            let share = if converged && p_true < 6.0 { 0.5 } else { 0.1 };
             if e == 146.8 && rms_err >= share * rms_eff {
                 failures.push(format!(
                     "E2 {e} p {p_true}: {rms_err:.4} vs effect {rms_eff:.4} mm"

@@ -42,9 +42,11 @@ impl Channel {
 }
 
 /// Half-width (mm of u_s) of the window over which a pressure reference's change is
-/// averaged ([`Surface::with_pressure_reference`]): about half the period of the wiggle the
-/// level -2 thickness table's change between two pressures shows along u_s (its sign turns
-/// every 0.4-0.5 mm at 170 kPa).
+/// averaged ([`Surface::with_pressure_reference`]): about half the period of the wiggle a
+/// mesh level -2 thickness table's change between two pressures showed along u_s (its sign
+/// turned every 0.4-0.5 mm at 170 kPa). On the production-mesh table the raw change
+/// wiggles by up to +-5 um at 4.5 kPa (146.8 kPa) and the averaged one is within 1.4 um of
+/// converged solves up to u_s 1.4 mm (docs/diagnosis.md, Method, step 3).
 pub const REFERENCE_WINDOW_MM: f64 = 0.25;
 
 /// Samples of u_s across that window (odd: one at its centre).
@@ -140,9 +142,9 @@ impl<'a> Surface<'a> {
     /// (the node's value plus the reference's change); elsewhere from this surface's own
     /// table, linear in p_air between its nodes, and outside its pressures continued
     /// linearly from the two nearest nodes. Between inflated nodes the reference is not
-    /// used: its coarse mesh's contact radius moves in steps along u_s, so its change
-    /// between two pressures wiggles by several um (4-5 um RMS against converged solves at
-    /// 8, 13 and 17 kPa, where the converged chord is within 1 um).
+    /// used: its mesh's contact radius moves in steps along u_s, so its change between two
+    /// pressures wiggles (on mesh level -2 by 4-5 um RMS against converged solves at 8, 13
+    /// and 17 kPa, where the converged chord is within 1 um).
     pub fn sample(&self, e: f64, p: f64, u: f64) -> ModelSample {
         if let Some(r) = &self.pressure_reference
             && self.below_first_inflated_node(p)
@@ -171,7 +173,7 @@ impl<'a> Surface<'a> {
 
     /// The change of this surface from pressure `p0` to `p1` at u_s, averaged over a window
     /// of u_s centred on it ([`REFERENCE_WINDOW_MM`] each side, narrowed near the ends of the
-    /// u_s range so that the window stays symmetric and a linear trend is kept): a coarse
+    /// u_s range so that the window stays symmetric and a linear trend is kept): a table
     /// mesh's contact edge moves from node to node in steps, at u_s positions that shift with
     /// p_air, so the change between two pressures wiggles along u_s with the element size.
     fn smoothed_change(&self, e: f64, p0: f64, p1: f64, u: f64) -> ModelSample {
