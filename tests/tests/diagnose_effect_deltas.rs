@@ -11,8 +11,8 @@
 //! for frictionless curves) and is not measured here.
 
 use diagnosis::model::Surface;
-use diagnosis::simulate::{TRUTH_MAX_DEPTH_MM, TRUTH_MESH_LEVEL, TRUTH_STEPS};
-use diagnosis::tables::{EffectAxis, effect_base_params, read_effect_table, shipped_tables_dir};
+use diagnosis::simulate::truth_params;
+use diagnosis::tables::{EffectAxis, read_effect_table, shipped_tables_dir};
 use fem_core::{Curve, CurveParams};
 
 fn tables_dir() -> std::path::PathBuf {
@@ -24,14 +24,7 @@ fn tables_dir() -> std::path::PathBuf {
 /// A converged solve (the simulated truth's settings) with `effect` applied to the base
 /// parameters.
 fn converged(e: f64, p: f64, effect: impl Fn(&mut CurveParams)) -> Curve {
-    let mut params = CurveParams {
-        sample_modulus_kpa: e,
-        pressure_kpa: p,
-        steps: TRUTH_STEPS,
-        max_depth_mm: TRUTH_MAX_DEPTH_MM,
-        mesh_level: TRUTH_MESH_LEVEL,
-        ..effect_base_params()
-    };
+    let mut params = truth_params(e, p);
     effect(&mut params);
     fem_core::Simulation::new(&params)
         .with_edge_band()

@@ -13,7 +13,6 @@
 //! solves (the edge band), as the simulated truth is made.
 
 use diagnosis::model::Surface;
-use diagnosis::simulate::{TRUTH_MAX_DEPTH_MM, TRUTH_MESH_LEVEL, TRUTH_STEPS};
 use diagnosis::tables::{
     EFFECT_MAX_DEPTH_MM, EFFECT_STEPS, EffectAxis, coarse_baseline, converged_baseline,
     effect_base_params, read_effect_table, shipped_tables_dir,
@@ -42,15 +41,7 @@ fn truth_params(e: f64, p: f64) -> CurveParams {
 /// A converged solve at (E2, p_air): the simulated truth's settings
 /// (`diagnosis::simulate::truth_curves` for a sample without table effects).
 fn converged_truth(e: f64, p: f64) -> Curve {
-    let params = CurveParams {
-        sample_modulus_kpa: e,
-        pressure_kpa: p,
-        steps: TRUTH_STEPS,
-        max_depth_mm: TRUTH_MAX_DEPTH_MM,
-        mesh_level: TRUTH_MESH_LEVEL,
-        ..effect_base_params()
-    };
-    fem_core::Simulation::new(&params)
+    fem_core::Simulation::new(&diagnosis::simulate::truth_params(e, p))
         .with_edge_band()
         .solve()
         .expect("measurement setup")

@@ -40,6 +40,20 @@ pub const TRUTH_STEPS: usize = 38;
 /// Final tube travel of the truth solves.
 pub const TRUTH_MAX_DEPTH_MM: f64 = 1.9;
 
+/// The truth's solve settings for the plain 7 mm sample at (E2, p_air): the converged
+/// table's mesh and step, to [`TRUTH_MAX_DEPTH_MM`] (solve them with
+/// `fem_core::Simulation::with_edge_band`).
+pub fn truth_params(modulus_kpa: f64, pressure_kpa: f64) -> CurveParams {
+    CurveParams {
+        sample_modulus_kpa: modulus_kpa,
+        pressure_kpa,
+        steps: TRUTH_STEPS,
+        max_depth_mm: TRUTH_MAX_DEPTH_MM,
+        mesh_level: TRUTH_MESH_LEVEL,
+        ..super::tables::effect_base_params()
+    }
+}
+
 /// The hidden effect of a simulation (never given to the diagnosis).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Hidden {

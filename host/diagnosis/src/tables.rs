@@ -5,7 +5,7 @@
 //! changes from their base slice (the slice at the axis' base value), added to the converged
 //! baseline ([`converged_baseline`]); the simulated truth adds its table effects the same
 //! way (`simulate::truth_curves`). An effect's change is carried far better than the contact
-//! radius itself: 2-3 um RMS from converged solves at level 0, against 5-15 um at level -2
+//! radius itself: 2.4-3.9 um RMS from converged solves at level 0, against 5-19 um at level -2
 //! (`tests/tests/diagnose_effect_deltas.rs`).
 //!
 //! Building them reuses fem-core's builder ([`fem_core::lut::build_lut`]) on the grids of
@@ -28,7 +28,7 @@ pub const EFFECT_STEPS: usize = 40;
 /// Mesh level of the friction table: level -2. On the production mesh friction changes the
 /// contact radius far less (its change is mostly in the load), and the selection, which
 /// screens candidates on the radius, no longer finds a friction of 0.4 at 170 kPa (it names
-/// a radius offset); see docs/diagnosis.md, Limitations.
+/// a radius offset); see docs/diagnosis.md, Effect tables.
 pub const FRICTION_MESH_LEVEL: i32 = -2;
 /// Load steps per curve of the friction table (0.1 mm of travel).
 pub const FRICTION_STEPS: usize = 20;
