@@ -180,3 +180,39 @@ fn interpolation_across_the_modulus_stays_within_a_few_micrometres() {
         }
     }
 }
+
+/// Every shipped table's header states what interpolating across E2 adds to a, per pressure
+/// of its base effects, and the figure is the one its own curves give (to the nanometre the
+/// header keeps): a table whose curves were changed without rewriting the header, or whose
+/// header was edited by hand, fails here.
+#[test]
+fn headers_state_the_interpolation_error_their_curves_give() {
+    use fem_core::lut::interpolation_error::modulus_leave_one_out;
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data");
+    for name in [
+        "default.lut",
+        "default-fine.lut",
+        "effects-thickness.lut",
+        "effects-friction.lut",
+        "effects-stiffening.lut",
+    ] {
+        let f = read_lut(&dir.join(name)).unwrap();
+        let stated = &f.header.modulus_interpolation;
+        let computed = modulus_leave_one_out(&f.lut);
+        assert!(!stated.is_empty(), "{name}: no interpolation figure");
+        assert_eq!(stated.len(), computed.len(), "{name}");
+        for (s, c) in stated.iter().zip(&computed) {
+            assert_eq!(s.pressure_kpa, c.pressure_kpa, "{name}");
+            assert_eq!(s.points, c.points, "{name}");
+            // rounded to a nanometre when written
+            assert!(
+                (s.max_um - c.max_um).abs() <= 5e-4,
+                "{name}: {s:?} vs {c:?}"
+            );
+            assert!(
+                (s.rms_um - c.rms_um).abs() <= 5e-4,
+                "{name}: {s:?} vs {c:?}"
+            );
+        }
+    }
+}

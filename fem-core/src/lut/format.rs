@@ -21,6 +21,7 @@ use sha2::{Digest, Sha256};
 
 use super::error::LutError;
 use super::grid::{LutGrid, Shard};
+use super::interpolation_error::{ModulusInterpolationError, modulus_leave_one_out};
 use super::table::{Lut, LutCurve};
 
 /// First token of every LUT file.
@@ -83,6 +84,13 @@ pub struct LutHeader {
     pub body_encoding: String,
     pub body_bytes: u64,
     pub curves: Vec<CurveEntry>,
+    /// What interpolating across E2 adds to the contact radius, per pressure of the base
+    /// sample's slice: every interior modulus node left out and read from its neighbours (the
+    /// interpolant at twice the grid spacing, [`super::interpolation_error`]), rounded to
+    /// nanometres. Derived from the curves when the table is written; absent in a shard
+    /// (its merge states it) and in tables written before it was recorded.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub modulus_interpolation: Vec<ModulusInterpolationError>,
 }
 
 impl LutHeader {
@@ -140,8 +148,25 @@ impl LutHeader {
                     truncated_at_h_mm: lut.truncated_at_h_mm(c),
                 })
                 .collect(),
+            modulus_interpolation: if lut.shard.is_some() {
+                Vec::new()
+            } else {
+                modulus_leave_one_out(lut)
+                    .into_iter()
+                    .map(|e| ModulusInterpolationError {
+                        max_um: round_nm(e.max_um),
+                        rms_um: round_nm(e.rms_um),
+                        ..e
+                    })
+                    .collect()
+            },
         }
     }
+}
+
+/// `um` rounded to a nanometre (a header figure, not a computation's input).
+fn round_nm(um: f64) -> f64 {
+    (um * 1000.0).round() / 1000.0
 }
 
 /// Lower-case hex SHA-256 of `bytes`.

@@ -19,11 +19,11 @@ pub const U_S_STEP_MM: f64 = 0.02;
 /// does not use it either.
 pub const U_S_MIN_MM: f64 = 0.2;
 
-/// The leave-one-out interpolation error in a at one pressure (base effects).
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+/// The leave-one-out interpolation error in a at one pressure (the base sample's slice).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ModulusInterpolationError {
     pub pressure_kpa: f64,
-    /// Largest |prediction - stored a| over the left-out nodes and u_s (µm).
+    /// Largest |prediction - stored a| over the left-out nodes, u_s and slices (µm).
     pub max_um: f64,
     /// RMS over the same points (µm).
     pub rms_um: f64,
@@ -31,6 +31,13 @@ pub struct ModulusInterpolationError {
     pub worst_modulus_kpa: f64,
     /// Points compared.
     pub points: usize,
+    /// Slices of the effect axes compared (1 in a table without an effect axis).
+    #[serde(default = "one_slice")]
+    pub slices: usize,
+}
+
+fn one_slice() -> usize {
+    1
 }
 
 /// a at `u_s` along a stored curve, linear between load steps (the first bracketing step
@@ -52,60 +59,80 @@ fn max_u_s(curve: &LutCurve) -> f64 {
         .fold(f64::NEG_INFINITY, f64::max)
 }
 
-/// The leave-one-out error across E2 at every pressure of the base effects (the first
-/// value of every effect axis). Pressures with fewer than three usable moduli are left out.
+/// The leave-one-out error across E2 at every pressure, over every slice of the effect axes
+/// (a table that varies an effect: every value of it). Pressures with fewer than three
+/// usable moduli are left out.
 pub fn modulus_leave_one_out(lut: &Lut) -> Vec<ModulusInterpolationError> {
     let g = &lut.grid;
     let n = g.modulus_kpa.len();
+    let e = &g.effects;
+    let mut slices = Vec::new();
+    for stiffening in 0..e.stiffening.len() {
+        for material in 0..e.material.len() {
+            for friction in 0..e.friction.len() {
+                for thickness in 0..e.sample_thickness_mm.len() {
+                    slices.push((stiffening, material, friction, thickness));
+                }
+            }
+        }
+    }
     let mut out = Vec::new();
     for (jp, &p) in g.pressure_kpa.iter().enumerate() {
-        let curves: Vec<Option<&LutCurve>> = (0..n)
-            .map(|m| {
-                lut.curve(g.flat_index(GridIndex {
-                    stiffening: 0,
-                    material: 0,
-                    friction: 0,
-                    thickness: 0,
-                    pressure: jp,
-                    modulus: m,
-                }))
-                .filter(|c| c.failure.is_none() && c.u_s_mm.len() >= 2)
-            })
-            .collect();
         let (mut max_um, mut sum_sq, mut points, mut worst) = (0.0f64, 0.0, 0usize, f64::NAN);
-        for k in 1..n.saturating_sub(1) {
-            let Some(left_out) = curves[k] else { continue };
-            let neighbours: Vec<usize> = [k.checked_sub(2), Some(k - 1), Some(k + 1), Some(k + 2)]
-                .into_iter()
-                .flatten()
-                .filter(|&j| j < n && curves[j].is_some())
+        let mut slices_compared = 0;
+        for &(stiffening, material, friction, thickness) in &slices {
+            let curves: Vec<Option<&LutCurve>> = (0..n)
+                .map(|m| {
+                    lut.curve(g.flat_index(GridIndex {
+                        stiffening,
+                        material,
+                        friction,
+                        thickness,
+                        pressure: jp,
+                        modulus: m,
+                    }))
+                    .filter(|c| c.failure.is_none() && c.u_s_mm.len() >= 2)
+                })
                 .collect();
-            if !(neighbours.contains(&(k - 1)) && neighbours.contains(&(k + 1))) {
-                continue;
-            }
-            let reach = neighbours
-                .iter()
-                .filter_map(|&j| curves[j].map(max_u_s))
-                .fold(max_u_s(left_out), f64::min);
-            let xs: Vec<f64> = neighbours.iter().map(|&j| g.modulus_kpa[j].ln()).collect();
-            // u_s on a fixed lattice (a running sum would lose the last point to rounding)
-            let count = ((reach - U_S_MIN_MM) / U_S_STEP_MM + 1e-9).floor();
-            for i in 0..=(count.max(-1.0) as i64) {
-                let u = U_S_MIN_MM + i as f64 * U_S_STEP_MM;
-                let ys: Option<Vec<f64>> = neighbours
-                    .iter()
-                    .map(|&j| curves[j].and_then(|c| a_at(c, u)))
-                    .collect();
-                if let (Some(ys), Some(truth)) = (ys, a_at(left_out, u)) {
-                    let (pred, _) = pchip::eval(&xs, &ys, g.modulus_kpa[k].ln());
-                    let d_um = 1e3 * (pred - truth).abs();
-                    if d_um > max_um {
-                        max_um = d_um;
-                        worst = g.modulus_kpa[k];
-                    }
-                    sum_sq += d_um * d_um;
-                    points += 1;
+            let points_before = points;
+            for k in 1..n.saturating_sub(1) {
+                let Some(left_out) = curves[k] else { continue };
+                let neighbours: Vec<usize> =
+                    [k.checked_sub(2), Some(k - 1), Some(k + 1), Some(k + 2)]
+                        .into_iter()
+                        .flatten()
+                        .filter(|&j| j < n && curves[j].is_some())
+                        .collect();
+                if !(neighbours.contains(&(k - 1)) && neighbours.contains(&(k + 1))) {
+                    continue;
                 }
+                let reach = neighbours
+                    .iter()
+                    .filter_map(|&j| curves[j].map(max_u_s))
+                    .fold(max_u_s(left_out), f64::min);
+                let xs: Vec<f64> = neighbours.iter().map(|&j| g.modulus_kpa[j].ln()).collect();
+                // u_s on a fixed lattice (a running sum would lose the last point to rounding)
+                let count = ((reach - U_S_MIN_MM) / U_S_STEP_MM + 1e-9).floor();
+                for i in 0..=(count.max(-1.0) as i64) {
+                    let u = U_S_MIN_MM + i as f64 * U_S_STEP_MM;
+                    let ys: Option<Vec<f64>> = neighbours
+                        .iter()
+                        .map(|&j| curves[j].and_then(|c| a_at(c, u)))
+                        .collect();
+                    if let (Some(ys), Some(truth)) = (ys, a_at(left_out, u)) {
+                        let (pred, _) = pchip::eval(&xs, &ys, g.modulus_kpa[k].ln());
+                        let d_um = 1e3 * (pred - truth).abs();
+                        if d_um > max_um {
+                            max_um = d_um;
+                            worst = g.modulus_kpa[k];
+                        }
+                        sum_sq += d_um * d_um;
+                        points += 1;
+                    }
+                }
+            }
+            if points > points_before {
+                slices_compared += 1;
             }
         }
         if points > 0 {
@@ -115,6 +142,7 @@ pub fn modulus_leave_one_out(lut: &Lut) -> Vec<ModulusInterpolationError> {
                 rms_um: (sum_sq / points as f64).sqrt(),
                 worst_modulus_kpa: worst,
                 points,
+                slices: slices_compared,
             });
         }
     }

@@ -352,8 +352,16 @@ fn describe(path: &Path, file: &LutFile) -> String {
     for e in fem_core::lut::interpolation_error::modulus_leave_one_out(lut) {
         line(format!(
             "E2 interpolation at {} kPa: up to {:.1} um of a, {:.1} um RMS (a node left out \
-             and read from its neighbours, at twice the grid spacing; worst at {} kPa)",
-            e.pressure_kpa, e.max_um, e.rms_um, e.worst_modulus_kpa
+             and read from its neighbours, at twice the grid spacing; worst at {} kPa{})",
+            e.pressure_kpa,
+            e.max_um,
+            e.rms_um,
+            e.worst_modulus_kpa,
+            if e.slices > 1 {
+                format!("; over {} slices of the effect axes", e.slices)
+            } else {
+                String::new()
+            }
         ));
     }
     let ok: Vec<_> = lut.curves.iter().filter(|c| c.failure.is_none()).collect();
