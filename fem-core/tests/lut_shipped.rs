@@ -182,9 +182,10 @@ fn interpolation_across_the_modulus_stays_within_a_few_micrometres() {
 }
 
 /// Every shipped table's header states what interpolating across E2 adds to a, per pressure
-/// of its base effects, and the figure is the one its own curves give (to the nanometre the
-/// header keeps): a table whose curves were changed without rewriting the header, or whose
-/// header was edited by hand, fails here.
+/// over every effect slice, and the figure is the one its own curves give (to the nanometre
+/// the header keeps): a table whose curves were changed without rewriting the header, or
+/// whose header was edited by hand, fails here. (The figure's own correctness is the unit
+/// tests' of `fem_core::lut::interpolation_error`.)
 #[test]
 fn headers_state_the_interpolation_error_their_curves_give() {
     use fem_core::lut::interpolation_error::modulus_leave_one_out;

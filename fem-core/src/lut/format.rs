@@ -84,8 +84,8 @@ pub struct LutHeader {
     pub body_encoding: String,
     pub body_bytes: u64,
     pub curves: Vec<CurveEntry>,
-    /// What interpolating across E2 adds to the contact radius, per pressure of the base
-    /// sample's slice: every interior modulus node left out and read from its neighbours (the
+    /// What interpolating across E2 adds to the contact radius, per pressure over every slice
+    /// of the effect axes: every interior modulus node left out and read from its neighbours (the
     /// interpolant at twice the grid spacing, [`super::interpolation_error`]), rounded to
     /// nanometres. Derived from the curves when the table is written; absent in a shard
     /// (its merge states it) and in tables written before it was recorded.

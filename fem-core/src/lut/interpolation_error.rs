@@ -19,7 +19,8 @@ pub const U_S_STEP_MM: f64 = 0.02;
 /// does not use it either.
 pub const U_S_MIN_MM: f64 = 0.2;
 
-/// The leave-one-out interpolation error in a at one pressure (the base sample's slice).
+/// The leave-one-out interpolation error in a at one pressure, over every slice of the
+/// effect axes.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ModulusInterpolationError {
     pub pressure_kpa: f64,
@@ -32,12 +33,7 @@ pub struct ModulusInterpolationError {
     /// Points compared.
     pub points: usize,
     /// Slices of the effect axes compared (1 in a table without an effect axis).
-    #[serde(default = "one_slice")]
     pub slices: usize,
-}
-
-fn one_slice() -> usize {
-    1
 }
 
 /// a at `u_s` along a stored curve, linear between load steps (the first bracketing step
@@ -154,6 +150,26 @@ mod tests {
     use super::*;
     use crate::lut::grid::LutGrid;
 
+    /// Curve `index` at modulus `e`: a linear in ln E2 at every u_s (0..2 mm), plus `bump_mm`.
+    fn linear_curve(index: usize, e: f64, bump_mm: f64) -> LutCurve {
+        let u_s_mm: Vec<f64> = (0..=20).map(|i| 0.1 * i as f64).collect();
+        LutCurve {
+            index,
+            failure: None,
+            rest_volume_mm3: 1.0,
+            inflated_volume_mm3: 1.0,
+            inflation_apex_mm: 0.0,
+            h_mm: u_s_mm.clone(),
+            a_mm: u_s_mm
+                .iter()
+                .map(|u| 1.0 + u * (1.0 - 0.1 * e.ln()) + bump_mm)
+                .collect(),
+            load_n: vec![0.0; u_s_mm.len()],
+            volume_mm3: vec![1.0; u_s_mm.len()],
+            u_s_mm,
+        }
+    }
+
     /// A table whose a is linear in ln E2 at every u_s: PCHIP reproduces straight lines, so
     /// the leave-one-out error is zero to rounding; a bump of 4 um at one node shows up with
     /// its full size.
@@ -165,25 +181,7 @@ mod tests {
             vec![10.0, 20.0, 40.0, 80.0, 160.0],
             vec![6.0],
         );
-        let curve = |m: usize, bump_mm: f64| {
-            let e: f64 = grid.modulus_kpa[m];
-            let u_s_mm: Vec<f64> = (0..=20).map(|i| 0.1 * i as f64).collect();
-            LutCurve {
-                index: m,
-                failure: None,
-                rest_volume_mm3: 1.0,
-                inflated_volume_mm3: 1.0,
-                inflation_apex_mm: 0.0,
-                h_mm: u_s_mm.clone(),
-                a_mm: u_s_mm
-                    .iter()
-                    .map(|u| 1.0 + u * (1.0 - 0.1 * e.ln()) + bump_mm)
-                    .collect(),
-                load_n: vec![0.0; u_s_mm.len()],
-                volume_mm3: vec![1.0; u_s_mm.len()],
-                u_s_mm,
-            }
-        };
+        let curve = |m: usize, bump_mm: f64| linear_curve(m, grid.modulus_kpa[m], bump_mm);
         let table = |bump_at: Option<usize>| Lut {
             grid: grid.clone(),
             fem_core_version: Lut::this_fem_core_version(),
@@ -206,6 +204,48 @@ mod tests {
         assert!(
             bumped[0].max_um >= 4.0 - 1e-9 && bumped[0].max_um < 5.0,
             "{bumped:?}"
+        );
+    }
+
+    /// A table with an effect axis: every slice is compared, so a bump in the second slice
+    /// only (not the first, which the figure used to read alone) is found.
+    #[test]
+    fn every_effect_slice_is_compared() {
+        let mut grid = LutGrid::with_axes(
+            "loo-slices",
+            LutGrid::tiny_grid().base,
+            vec![10.0, 20.0, 40.0, 80.0, 160.0],
+            vec![6.0],
+        );
+        grid.effects.friction = vec![0.0, 0.4];
+        let curves = (0..10)
+            .map(|index| {
+                let (slice, m) = (index / 5, index % 5);
+                let bump_mm = if slice == 1 && m == 2 { 0.004 } else { 0.0 };
+                linear_curve(index, grid.modulus_kpa[m], bump_mm)
+            })
+            .collect();
+        let table = Lut {
+            grid,
+            fem_core_version: Lut::this_fem_core_version(),
+            solver: "synthetic".into(),
+            shard: None,
+            contact_radius_error: None,
+            edge_band: None,
+            curves,
+        };
+        let errors = modulus_leave_one_out(&table);
+        assert_eq!(errors.len(), 1);
+        assert_eq!(errors[0].slices, 2, "{errors:?}");
+        assert_eq!(errors[0].points, 2 * 3 * 91, "{errors:?}");
+        assert!(
+            errors[0].max_um >= 4.0 - 1e-9 && errors[0].max_um < 5.0,
+            "{errors:?}"
+        );
+        // at the bumped node or a neighbour read through it (as in the test above)
+        assert!(
+            [20.0, 40.0, 80.0].contains(&errors[0].worst_modulus_kpa),
+            "{errors:?}"
         );
     }
 }
