@@ -279,7 +279,7 @@ pub fn model_of_diagnosis(
     baseline: String,
 ) -> Result<ModelFile, String> {
     let mut effects = Vec::new();
-    for named in &d.forward.effects {
+    for named in &d.effects {
         let kind = EffectKind::from_name(&named.effect)
             .ok_or_else(|| format!("unknown effect {:?}", named.effect))?;
         let (pname, _, _) = kind.parameter();

@@ -47,11 +47,26 @@ pub struct GlsFit {
     pub iterations: usize,
 }
 
-/// What a fit minimises: the radius channel's chi^2, or both channels' joint chi^2.
+/// What a fit minimises: the radius channel's chi^2, the load channel's, or both channels'
+/// joint chi^2.
 #[derive(Debug, Clone, Copy)]
 pub enum Objective<'w> {
     Radius(&'w Whitener),
+    /// The load channel alone (its own whitener): parameters the load does not see (a
+    /// camera's offset or scale) keep their starting values, their Jacobian column being
+    /// zero.
+    Load(&'w Whitener),
     Joint(&'w JointWhitener),
+    /// One part of the joint chi^2 ([`JointWhitener::split`]): the radius by its own
+    /// covariance, or the load given the radius.
+    JointPart(&'w JointWhitener, JointPart),
+}
+
+/// The two independent parts of the joint chi^2.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum JointPart {
+    Radius,
+    LoadGivenRadius,
 }
 
 /// Fits `cand` (or the baseline) to the contact radius of `points[subset]` starting at
@@ -128,7 +143,7 @@ pub fn fit_to(
         }
         let w = match objective {
             Objective::Radius(whitener) => whitener.whiten(&r),
-            Objective::Joint(joint) => {
+            Objective::Load(whitener) => {
                 let mut r_p = vec![0.0; n_all];
                 for &i in subset {
                     let p = predict_with(model, inc, cand, e, th, &points[i], Channel::Load);
@@ -138,7 +153,29 @@ pub fn fit_to(
                     }
                     r_p[i] = v;
                 }
-                joint.whiten(&r, &r_p)
+                whitener.whiten(&r_p)
+            }
+            Objective::Joint(joint) | Objective::JointPart(joint, _) => {
+                let mut r_p = vec![0.0; n_all];
+                for &i in subset {
+                    let p = predict_with(model, inc, cand, e, th, &points[i], Channel::Load);
+                    let v = Channel::Load.measured(&points[i]) - p;
+                    if !v.is_finite() {
+                        return None;
+                    }
+                    r_p[i] = v;
+                }
+                let w = joint.whiten(&r, &r_p);
+                match objective {
+                    Objective::JointPart(_, part) => {
+                        let (radius, load) = joint.split(&w);
+                        match part {
+                            JointPart::Radius => radius,
+                            JointPart::LoadGivenRadius => load,
+                        }
+                    }
+                    _ => w,
+                }
             }
         };
         Some((r, w))
@@ -222,8 +259,9 @@ pub fn fit_to(
         }
     }
     let n = match objective {
-        Objective::Radius(_) => subset.len(),
+        Objective::Radius(_) | Objective::Load(_) => subset.len(),
         Objective::Joint(joint) => joint.len(),
+        Objective::JointPart(joint, _) => joint.len() / 2,
     };
     let dof = n.saturating_sub(k).max(1) as f64;
     let scale = (s / dof).max(1.0);

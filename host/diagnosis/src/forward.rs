@@ -26,6 +26,7 @@
 use serde::Serialize;
 
 use super::candidates::{Candidate, EffectKind, incompatibility};
+use super::consistency::{self, ChannelConsistency};
 use super::data::Point;
 use super::fitting::GlsFit;
 use super::load_channel::LoadChannel;
@@ -289,6 +290,9 @@ pub struct ForwardSelection {
     pub modulus_after_kpa: f64,
     /// Baseline chi^2/dof over the final model's.
     pub gap_shrink: Option<f64>,
+    /// Whether the radius and the load agree under the final model (the baseline when no
+    /// effect was added); None without a load channel with its joint covariance.
+    pub consistency: Option<ChannelConsistency>,
 }
 
 fn gap_of(label: &str, f: &GlsFit, load: Option<(&LoadChannel, f64)>) -> GapSummary {
@@ -357,6 +361,7 @@ pub fn run(
     let mut not_testable: Vec<NotTestable> = Vec::new();
     let mut effects: Vec<NamedEffect> = Vec::new();
     let mut final_fit: Option<(GlsFit, GapSummary)> = None;
+    let mut final_model: Option<(Model<'_>, String)> = None;
     let stop = loop {
         // an ambiguous first step still names its best effect (the report's `effect`), but
         // the search does not build on a choice the data cannot make
@@ -441,6 +446,7 @@ pub fn run(
             }
         }
         next.included.push((w.candidate, f.theta));
+        final_model = Some((next.clone(), label_after.clone()));
         let f_modulus = f.modulus_kpa;
         if ambiguous_first {
             final_fit = Some((f, after));
@@ -525,8 +531,22 @@ pub fn run(
     let modulus_after_kpa = final_fit
         .as_ref()
         .map_or(first.base.modulus_kpa, |(f, _)| f.modulus_kpa);
+    let (tested, label) = final_model.unwrap_or_else(|| (model.clone(), "baseline".into()));
+    let consistency = first.load.as_ref().and_then(|lc| {
+        consistency::check(
+            &tested,
+            &label,
+            points,
+            subset,
+            whitener,
+            lc,
+            modulus_after_kpa,
+            options.seed,
+        )
+    });
     let final_model = final_fit.map(|(_, g)| g);
     ForwardSelection {
+        consistency,
         gap_shrink: final_model
             .as_ref()
             .map(|g| baseline_gap.chi2_per_dof / g.chi2_per_dof.max(1e-300)),

@@ -216,6 +216,23 @@ impl JointWhitener {
         out
     }
 
+    /// Splits whitened values `w` (from [`JointWhitener::whiten`]) into each block's first
+    /// half, L_aa^-1 r_a (the radius by its own covariance), and its second half, the
+    /// load's innovation once what the radius predicts of it through C_aP is removed
+    /// (whitened by the conditional covariance C_P - C_Pa C_a^-1 C_aP): the joint chi^2 is
+    /// the sum of the two parts' squares, and under the model they are independent.
+    pub fn split(&self, w: &[f64]) -> (Vec<f64>, Vec<f64>) {
+        let (mut radius, mut load_given_radius) = (Vec::new(), Vec::new());
+        let mut k = 0;
+        for b in &self.blocks {
+            let n = b.idx.len();
+            radius.extend_from_slice(&w[k..k + n]);
+            load_given_radius.extend_from_slice(&w[k + n..k + 2 * n]);
+            k += 2 * n;
+        }
+        (radius, load_given_radius)
+    }
+
     /// L z for whitened noise z: correlated noise of both channels over the subset,
     /// returned as (radius, load) over all points (zero outside the subset).
     pub fn colour(&self, z: &[f64], total: usize) -> (Vec<f64>, Vec<f64>) {

@@ -20,6 +20,7 @@ pub mod applied;
 pub mod candidates;
 #[cfg(feature = "sim")]
 pub mod confusion;
+pub mod consistency;
 pub mod data;
 pub mod errors_in_variables;
 pub mod fitting;
@@ -459,9 +460,25 @@ pub fn diagnose(
     let minimum_detectable = verdict::minimum_detectable(&sigs, t95);
     let winner = decision.winner.map(|i| screened[i].clone());
 
-    // 6. confidence: rerun the selection on data simulated from the augmented fit
+    // 6. forward selection: what remains once the named effect is in the model; then
+    // whether the radius and the load agree under its final model (consistency.rs): when
+    // they do not, the library's effects do not explain the data, whatever they improved
+    let forward = forward::run(
+        &model, &cands, &points, &subset, &noise, &whitener, options, &first,
+    );
+    let outside_library = forward.consistency.as_ref().is_some_and(|c| !c.agree);
+    let verdict = if outside_library {
+        Verdict::Unexplained
+    } else {
+        decision.verdict
+    };
+    if outside_library {
+        notes.push("the effects the selection found do not reconcile the radius with the load (see \"radius and load under\"): an effect outside the library; the forward selection is shown as tried, and nothing is named".into());
+    }
+
+    // 7. confidence: rerun the selection on data simulated from the augmented fit
     let mut confidence = None;
-    if let (Some(w), Verdict::Effect | Verdict::Ambiguous) = (&winner, decision.verdict)
+    if let (Some(w), Verdict::Effect | Verdict::Ambiguous) = (&winner, verdict)
         && let Some(aug) = &w.fit
         && options.confidence_reruns > 0
     {
@@ -538,7 +555,7 @@ pub fn diagnose(
         }
     }
 
-    // 7. gap before and after
+    // 8. gap before and after
     let held = winner.as_ref().and_then(|w| w.held_out.clone());
     let load_values = load.as_ref().map_or(0, |lc| lc.whitener.len()).max(1) as f64;
     let baseline = GapSummary {
@@ -549,7 +566,7 @@ pub fn diagnose(
             held.as_ref().map(|h| h.chi2_per_point(false)),
         )
     };
-    let named = matches!(decision.verdict, Verdict::Effect | Verdict::Ambiguous);
+    let named = matches!(verdict, Verdict::Effect | Verdict::Ambiguous);
     let augmented = if named {
         winner.as_ref().and_then(|w| {
             w.fit.as_ref().map(|f| GapSummary {
@@ -567,10 +584,6 @@ pub fn diagnose(
     let gap_shrink = augmented
         .as_ref()
         .map(|a| baseline.chi2_per_dof / a.chi2_per_dof.max(1e-300));
-    // 8. forward selection: what remains once the named effect is in the model
-    let forward = forward::run(
-        &model, &cands, &points, &subset, &noise, &whitener, options, &first,
-    );
     let joint_fit = match (&winner, named) {
         (Some(w), true) => {
             w.joint_fit
@@ -689,7 +702,7 @@ pub fn diagnose(
         }),
     };
     Ok(Diagnosis {
-        verdict: decision.verdict,
+        verdict,
         effect: if named {
             winner.as_ref().map(|w| w.effect.clone())
         } else {
@@ -714,7 +727,11 @@ pub fn diagnose(
         minimum_detectable,
         held_out: held,
         joint_fit,
-        effects: forward.effects.clone(),
+        effects: if named {
+            forward.effects.clone()
+        } else {
+            Vec::new()
+        },
         forward,
         points_used: n,
         points_excluded: excluded,

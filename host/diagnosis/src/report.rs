@@ -20,6 +20,39 @@ pub fn text(d: &Diagnosis) -> String {
             _ => String::new(),
         }
     );
+    if let Some(c) = d.forward.consistency.as_ref().filter(|c| !c.agree)
+        && d.verdict == super::Verdict::Unexplained
+    {
+        let flagged: Vec<String> = c
+            .cells
+            .iter()
+            .filter(|c| c.flagged)
+            .map(|c| {
+                format!(
+                    "{} at {} kPa, u_s {:.2}..{:.2} mm (z {:+.1})",
+                    if c.channel == "a" { "radius" } else { "load" },
+                    c.p_air_kpa,
+                    c.u_s_range_mm[0],
+                    c.u_s_range_mm[1],
+                    c.z
+                )
+            })
+            .collect();
+        let _ = writeln!(
+            s,
+            "  no effect of the library reconciles the radius with the load: under {} the radius alone gives E2 = {:.1} kPa, the load alone {:.1} (PG = {:.1}, p = {:.3})",
+            c.model, c.radius_modulus_kpa, c.load_modulus_kpa, c.statistic, c.p_value
+        );
+        let _ = writeln!(
+            s,
+            "  where: {}",
+            if flagged.is_empty() {
+                "no single window stands out".to_string()
+            } else {
+                flagged.join("; ")
+            }
+        );
+    }
     if let Some(c) = d.confidence {
         let _ = writeln!(
             s,
@@ -260,6 +293,7 @@ pub fn text(d: &Diagnosis) -> String {
         let _ = writeln!(s, "  gap shrink (chi2/dof before / after): {gs:.2}");
     }
     forward_text(&mut s, d);
+    consistency_text(&mut s, d);
     let _ = writeln!(
         s,
         "\n{} points used, {} outside the table's u_s range or below {} mm of u_s; {:.2} s",
@@ -396,6 +430,37 @@ fn forward_text(s: &mut String, d: &Diagnosis) {
             g.chi2_per_dof,
             f.gap_shrink.unwrap_or(f64::NAN)
         );
+    }
+}
+
+/// Whether the radius and the load agree under the final model, and where they part.
+fn consistency_text(s: &mut String, d: &Diagnosis) {
+    if let Some(c) = &d.forward.consistency {
+        let _ = writeln!(
+            s,
+            "  radius and load under {}: E2 {:.1} kPa from the radius alone, {:.1} from the load alone, {:.1} from both; PG = {:.1} (99 % of {} draws under the model below {:.1}; p = {:.3}): {}",
+            c.model,
+            c.radius_modulus_kpa,
+            c.load_modulus_kpa,
+            c.joint_modulus_kpa,
+            c.statistic,
+            c.draws,
+            c.statistic_99,
+            c.p_value,
+            if c.agree { "they agree" } else { "they disagree" }
+        );
+        for cell in c.cells.iter().filter(|c| c.flagged) {
+            let _ = writeln!(
+                s,
+                "    {} {:5.1} kPa u_s {:.2}..{:.2} mm: mean whitened {:+.2}, z {:+.1}",
+                cell.channel,
+                cell.p_air_kpa,
+                cell.u_s_range_mm[0],
+                cell.u_s_range_mm[1],
+                cell.mean_whitened,
+                cell.z
+            );
+        }
     }
 }
 
