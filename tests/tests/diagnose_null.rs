@@ -52,9 +52,16 @@ fn false_positives(seeds: u64, modulus_kpa: f64) -> (usize, Vec<String>) {
         if d.verdict.as_str() != "none" {
             fp += 1;
             labels.push(format!(
-                "seed {seed}: {} {:?} (baseline chi2/dof {:.2}; threshold {:.2}; {})",
+                "seed {seed}: {} {:?}{} (baseline chi2/dof {:.2}; threshold {:.2}; {})",
                 d.verdict.as_str(),
                 d.effect,
+                d.forward.consistency.as_ref().filter(|c| !c.agree).map_or(
+                    String::new(),
+                    |c| format!(
+                        " [radius and load disagree under {}: E2 {:.1} vs {:.1} kPa, z {:+.2}]",
+                        c.model, c.radius_modulus_kpa, c.load_given_radius_modulus_kpa, c.modulus_z
+                    )
+                ),
                 d.baseline.chi2_per_dof,
                 d.threshold.delta_chi2_95,
                 d.candidates

@@ -40,8 +40,13 @@ pub fn text(d: &Diagnosis) -> String {
             .collect();
         let _ = writeln!(
             s,
-            "  no effect of the library reconciles the radius with the load: under {} the radius alone gives E2 = {:.1} kPa, the load alone {:.1} (PG = {:.1}, p = {:.3})",
-            c.model, c.radius_modulus_kpa, c.load_modulus_kpa, c.statistic, c.p_value
+            "  no effect of the library reconciles the radius with the load: under {} the radius gives E2 = {:.1} kPa, the load given the radius {:.1} (z = {:+.2}, p {}; the load alone {:.1})",
+            c.model,
+            c.radius_modulus_kpa,
+            c.load_given_radius_modulus_kpa,
+            c.modulus_z,
+            p_text(c.modulus_p_value),
+            c.load_modulus_kpa
         );
         let _ = writeln!(
             s,
@@ -433,21 +438,47 @@ fn forward_text(s: &mut String, d: &Diagnosis) {
     }
 }
 
+/// A p-value as text ("= 0.042", "< 0.001").
+fn p_text(p: f64) -> String {
+    if p < 1e-3 {
+        "< 0.001".into()
+    } else {
+        format!("= {p:.3}")
+    }
+}
+
 /// Whether the radius and the load agree under the final model, and where they part.
 fn consistency_text(s: &mut String, d: &Diagnosis) {
     if let Some(c) = &d.forward.consistency {
         let _ = writeln!(
             s,
-            "  radius and load under {}: E2 {:.1} kPa from the radius alone, {:.1} from the load alone, {:.1} from both; PG = {:.1} (99 % of {} draws under the model below {:.1}; p = {:.3}): {}",
+            "  radius and load under {}: E2 {:.1} kPa from the radius (+-{:.1} %), {:.1} from the load given the radius (+-{:.1} %){}: z = {:+.2}, p {}: {}; (the load alone: {:.1} kPa; both: {:.1}; every parameter shared: PG = {:.1}, 99 % of {} draws under the model below {:.1}, p {})",
             c.model,
             c.radius_modulus_kpa,
+            100.0 * c.radius_ln_modulus_se,
+            c.load_given_radius_modulus_kpa,
+            100.0 * c.load_given_radius_ln_modulus_se,
+            if c.table_ln_modulus_error > 0.0 {
+                format!(
+                    ", the model's own +-{:.1} %",
+                    100.0 * c.table_ln_modulus_error
+                )
+            } else {
+                String::new()
+            },
+            c.modulus_z,
+            p_text(c.modulus_p_value),
+            if c.agree {
+                "they agree on the modulus"
+            } else {
+                "they disagree on the modulus"
+            },
             c.load_modulus_kpa,
             c.joint_modulus_kpa,
             c.statistic,
             c.draws,
             c.statistic_99,
-            c.p_value,
-            if c.agree { "they agree" } else { "they disagree" }
+            p_text(c.p_value)
         );
         for cell in c.cells.iter().filter(|c| c.flagged) {
             let _ = writeln!(

@@ -7,7 +7,8 @@
 //!   [`AMBIGUITY_DELTA_CHI2`] (a likelihood ratio below e^2 ~ 7): the group is reported;
 //! - `unexplained`: the baseline's lack of fit is significant (p < 0.01) but no candidate
 //!   passes, or the best leaves a significant lack of fit (p < 0.001) while shrinking the
-//!   gap by less than 1.5x;
+//!   gap by less than 1.5x; the diagnosis also turns any verdict into `unexplained` when the
+//!   radius and the load disagree under the final model ([`super::consistency`]);
 //! - `none`: the baseline is adequate; each candidate's minimum detectable size is the
 //!   parameter whose expected score reaches the threshold with 80 % power,
 //!   |theta_min| = (sqrt(T) + z_0.8) / |g_perp| with z_0.8 = 0.8416 (one-sided normal

@@ -230,6 +230,8 @@ fn the_joint_covariance_accounts_for_the_shared_u_s_reading() {
         za.extend_from_slice(&block[..per_pressure]);
         zp.extend_from_slice(&block[per_pressure..]);
     }
+    // the split the consistency check uses gives the same two parts
+    assert_eq!(joint.split(&z), (za.clone(), zp.clone()));
     let after = correlation(&za, &zp);
     eprintln!("shared white u_s: {:?}", joint.shared_white_u_mm);
     let chi2_per_value = z.iter().map(|v| v * v).sum::<f64>() / z.len() as f64;
