@@ -141,31 +141,24 @@ pub fn fit_to(
             }
             r[i] = points[i].a_mm - a;
         }
+        // the load's residuals over all points (zero outside the subset)
+        let load_residuals = || -> Option<Vec<f64>> {
+            let mut r_p = vec![0.0; n_all];
+            for &i in subset {
+                let p = predict_with(model, inc, cand, e, th, &points[i], Channel::Load);
+                let v = Channel::Load.measured(&points[i]) - p;
+                if !v.is_finite() {
+                    return None;
+                }
+                r_p[i] = v;
+            }
+            Some(r_p)
+        };
         let w = match objective {
             Objective::Radius(whitener) => whitener.whiten(&r),
-            Objective::Load(whitener) => {
-                let mut r_p = vec![0.0; n_all];
-                for &i in subset {
-                    let p = predict_with(model, inc, cand, e, th, &points[i], Channel::Load);
-                    let v = Channel::Load.measured(&points[i]) - p;
-                    if !v.is_finite() {
-                        return None;
-                    }
-                    r_p[i] = v;
-                }
-                whitener.whiten(&r_p)
-            }
+            Objective::Load(whitener) => whitener.whiten(&load_residuals()?),
             Objective::Joint(joint) | Objective::JointPart(joint, _) => {
-                let mut r_p = vec![0.0; n_all];
-                for &i in subset {
-                    let p = predict_with(model, inc, cand, e, th, &points[i], Channel::Load);
-                    let v = Channel::Load.measured(&points[i]) - p;
-                    if !v.is_finite() {
-                        return None;
-                    }
-                    r_p[i] = v;
-                }
-                let w = joint.whiten(&r, &r_p);
+                let w = joint.whiten(&r, &load_residuals()?);
                 match objective {
                     Objective::JointPart(_, part) => {
                         let (radius, load) = joint.split(&w);
