@@ -74,7 +74,7 @@ pub fn table_modulus_error(kind: EffectKind) -> f64 {
 /// The test's outcome.
 #[derive(Debug, Clone, Serialize)]
 pub struct ChannelConsistency {
-    /// The model tested ("baseline" or "baseline + effects").
+    /// The model tested ("baseline + " its effects).
     pub model: String,
     /// E2 of the model fitted to the radius alone, the load alone (by its own noise model)
     /// and both together.
@@ -214,6 +214,17 @@ fn null_statistics(
         .collect()
 }
 
+/// z and two-sided p of two moduli `(E2 in kPa, standard error of ln E2)` from independent
+/// parts of the data, with the model's own relative error `allowance` in quadrature:
+/// z = (ln E_1 - ln E_2) / sqrt(se_1^2 + se_2^2 + allowance^2).
+fn modulus_agreement(first: (f64, f64), second: (f64, f64), allowance: f64) -> (f64, f64) {
+    let z = (first.0.ln() - second.0.ln())
+        / (first.1 * first.1 + second.1 * second.1 + allowance * allowance)
+            .sqrt()
+            .max(1e-12);
+    (z, 2.0 * normal_sf(z.abs()))
+}
+
 /// Tests `model` (its included effects at their current values as the starting point, no
 /// candidate, the modulus from `e0`) on `points[subset]`: each channel alone and both
 /// together. None without a load channel with its joint covariance, or when a fit fails.
@@ -251,9 +262,11 @@ pub fn check(
         .map(|(c, _)| table_modulus_error(c.kind).powi(2))
         .sum::<f64>()
         .sqrt();
-    let modulus_z = (radius_part.modulus_kpa.ln() - load_part.modulus_kpa.ln())
-        / (se1 * se1 + se2 * se2 + table * table).sqrt().max(1e-12);
-    let modulus_p_value = 2.0 * normal_sf(modulus_z.abs());
+    let (modulus_z, modulus_p_value) = modulus_agreement(
+        (radius_part.modulus_kpa, se1),
+        (load_part.modulus_kpa, se2),
+        table,
+    );
     let exceed = null.iter().filter(|&&v| v >= statistic).count();
     let p_value = (1 + exceed) as f64 / (1 + DRAWS) as f64;
     let statistic_99 = super::stats::quantile(&null, 0.99);
@@ -314,6 +327,27 @@ mod tests {
         let zero = vec![0.0; 3];
         assert!((least_squares_minimum(&[c1, zero.clone()], &w) - 9.0).abs() < 1e-12);
         assert!((least_squares_minimum(&[zero], &w) - 17.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_moduli_are_compared_on_the_log_scale_with_the_allowance_in_quadrature() {
+        // the lens case of docs/results.md: 187.0 kPa (se 0.9 %) against 170.8 (1.0 %):
+        // ln(187.0 / 170.8) = 0.09062, sqrt(0.009^2 + 0.010^2) = 0.013454, z = 6.736
+        let (z, p) = modulus_agreement((187.0, 0.009), (170.8, 0.010), 0.0);
+        assert!((z - 6.736).abs() < 1e-3, "z {z}");
+        assert!(p < 1e-10, "p {p}");
+        // the sign follows the order, the p-value does not
+        let (z2, p2) = modulus_agreement((170.8, 0.010), (187.0, 0.009), 0.0);
+        assert!((z2 + z).abs() < 1e-12 && (p2 - p).abs() < 1e-15);
+        // a 6.7 % allowance: sqrt(0.009^2 + 0.010^2 + 0.067^2) = 0.068338, z = 1.326,
+        // two-sided p = 0.185 (normal table)
+        let (z, p) = modulus_agreement((187.0, 0.009), (170.8, 0.010), 0.067);
+        assert!((z - 1.326).abs() < 1e-3, "z {z}");
+        assert!((p - 0.185).abs() < 2e-3, "p {p}");
+        // equal moduli agree whatever their errors (p = 1 to the accuracy of stats::erfc,
+        // a rational approximation good to about 1e-7)
+        let (z, p) = modulus_agreement((170.0, 0.01), (170.0, 0.02), 0.0);
+        assert!(z.abs() < 1e-12 && (p - 1.0).abs() < 1e-6, "z {z}, p {p}");
     }
 
     /// Mean of the drawn PG for columns over two halves of 100 values each.
