@@ -532,8 +532,8 @@ pub fn run(
         .as_ref()
         .map_or(first.base.modulus_kpa, |(f, _)| f.modulus_kpa);
     // only a model with effects is checked: the question is whether the names found explain
-    // the data or only mimic something outside the library in the radius (the baseline's two
-    // moduli part by about 2 % on clean soft samples, docs/diagnosis.md, Limitations)
+    // the data or only mimic something outside the library in the radius (the baseline's z
+    // is wider than a standard normal on clean soft samples, docs/diagnosis.md, Limitations)
     let consistency =
         final_model
             .as_ref()
