@@ -9,7 +9,8 @@
 //! indentations each; the two record folders are read as `tactile diagnose` reads them
 //! (`experiment::record_meta::record_curve_at_set_pressure`) and diagnosed with the shipped
 //! tables. Prints one line per case and a summary: how often each effect is named (first, or
-//! later in the forward selection) and how often clean data names something. A proximity
+//! later in the forward selection) and how often clean data names something, then the
+//! rates over all effects with one-sided 95 % exact binomial bounds. A proximity
 //! offset and a manometer offset present from the start are removed by the bench's own
 //! calibrations (the rigid sweep, the vent-open zero), so for them `none` is the expected
 //! verdict; they run a second time with a stale calibration (`+stale`: the offsets appeared
@@ -33,6 +34,7 @@ use std::time::Instant;
 
 use diagnosis::candidates::EffectKind;
 use diagnosis::simulate::{Hidden, SimSpec, sizes, truth_modulus_kpa, truth_scenario};
+use diagnosis::stats::binomial_bounds;
 use diagnosis::{DiagnoseOptions, diagnose};
 use experiment::record_meta::record_curve_at_set_pressure;
 use experiment::simulated::{DemoOptions, run_demo_with};
@@ -59,6 +61,8 @@ struct CaseResult {
     modulus_baseline_kpa: f64,
     modulus_after_kpa: Option<f64>,
     seconds: f64,
+    /// Whether the hidden effect is at its clear (larger) test size.
+    clear: bool,
 }
 
 struct Args {
@@ -201,6 +205,7 @@ fn run_case(
         modulus_baseline_kpa: d.baseline.modulus_kpa,
         modulus_after_kpa: (!d.effects.is_empty()).then_some(d.forward.modulus_after_kpa),
         seconds: started.elapsed().as_secs_f64(),
+        clear: hidden.is_some_and(|h| h.size == sizes(h.kind)[1]),
     })
 }
 
@@ -361,6 +366,63 @@ fn summary(results: &[CaseResult]) {
         println!(
             "  {effect} at {size}: named first in {first} of {n}, named at all in {any} of {n}; E2 of the final model off by up to {worst_e2:+.1} %{calibrated_out}",
             n = of.len()
+        );
+    }
+    rates(results);
+}
+
+/// The cases that should give `none`: clean data is separate; these are the instrument
+/// offsets the bench's calibrations or each indentation's zero of u_s remove.
+fn none_expected(effect: &str) -> bool {
+    matches!(
+        effect,
+        "displacement_offset" | "displacement_offset+stale" | "pressure_offset"
+    )
+}
+
+/// The study's rates with one-sided 95 % exact binomial bounds
+/// (`diagnosis::stats::binomial_bounds`): an effect that reaches the measurement at its
+/// clear size named (target >= 95 %), clean data naming something (target <= 5 %).
+fn rates(results: &[CaseResult]) {
+    let count = |of: &[&CaseResult], hit: &dyn Fn(&CaseResult) -> bool| {
+        (of.iter().filter(|r| hit(r)).count(), of.len())
+    };
+    let clear: Vec<&CaseResult> = results
+        .iter()
+        .filter(|r| r.clear && r.effect != "none" && !none_expected(&r.effect))
+        .collect();
+    let nulls: Vec<&CaseResult> = results.iter().filter(|r| r.effect == "none").collect();
+    let calibrated: Vec<&CaseResult> = results
+        .iter()
+        .filter(|r| none_expected(&r.effect))
+        .collect();
+    let named_itself = |r: &CaseResult| {
+        r.named
+            .contains(&r.effect.trim_end_matches("+stale").to_string())
+    };
+    println!("rates (one-sided 95 % exact binomial bounds):");
+    let (k, n) = count(&clear, &named_itself);
+    if n > 0 {
+        let (lower, _) = binomial_bounds(k, n, 0.05);
+        println!(
+            "  an effect at its clear size named: {k} of {n} (rate >= {:.1} %; target >= 95 %)",
+            100.0 * lower
+        );
+    }
+    let (k, n) = count(&nulls, &|r| !r.named.is_empty());
+    if n > 0 {
+        let (_, upper) = binomial_bounds(k, n, 0.05);
+        println!(
+            "  clean data naming something: {k} of {n} (rate <= {:.1} %; target <= 5 %)",
+            100.0 * upper
+        );
+    }
+    let (k, n) = count(&calibrated, &|r| !r.named.is_empty());
+    if n > 0 {
+        let (_, upper) = binomial_bounds(k, n, 0.05);
+        println!(
+            "  offsets the bench removes naming something: {k} of {n} (rate <= {:.1} %)",
+            100.0 * upper
         );
     }
 }

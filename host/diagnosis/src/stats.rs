@@ -85,6 +85,55 @@ pub fn quantile(values: &[f64], q: f64) -> f64 {
     }
 }
 
+/// P(X >= k) for X ~ Binomial(n, p).
+fn binomial_upper_tail(k: usize, n: usize, p: f64) -> f64 {
+    if k == 0 {
+        return 1.0;
+    }
+    // sum of the terms C(n, j) p^j (1 - p)^(n - j), j >= k, built from the j = k term in logs
+    let ln_choose = |j: usize| -> f64 {
+        (1..=j)
+            .map(|i| ((n - j + i) as f64).ln() - (i as f64).ln())
+            .sum()
+    };
+    (k..=n)
+        .map(|j| (ln_choose(j) + j as f64 * p.ln() + (n - j) as f64 * (-p).ln_1p()).exp())
+        .sum::<f64>()
+        .min(1.0)
+}
+
+/// One-sided exact (Clopper–Pearson) confidence bounds at level `1 - alpha` for a rate
+/// seen `k` times in `n` trials: the lower bound is the p at which P(X >= k) = alpha, the
+/// upper the p at which P(X <= k) = alpha (Clopper & Pearson, Biometrika 26, 404, 1934).
+/// Found by bisection (the tails are monotone in p). (0, 1) without trials.
+pub fn binomial_bounds(k: usize, n: usize, alpha: f64) -> (f64, f64) {
+    if n == 0 {
+        return (0.0, 1.0);
+    }
+    let k = k.min(n);
+    // the p in (0, 1) at which the upper tail P(X >= j), increasing with p, equals target
+    let solve = |j: usize, target: f64| {
+        let (mut lo, mut hi) = (0.0f64, 1.0f64);
+        for _ in 0..60 {
+            let mid = 0.5 * (lo + hi);
+            if binomial_upper_tail(j, n, mid) < target {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        0.5 * (lo + hi)
+    };
+    let lower = if k == 0 { 0.0 } else { solve(k, alpha) };
+    // P(X <= k) = alpha where P(X >= k + 1) = 1 - alpha
+    let upper = if k == n {
+        1.0
+    } else {
+        solve(k + 1, 1.0 - alpha)
+    };
+    (lower, upper)
+}
+
 /// Seeded Gaussian generator.
 #[derive(Debug, Clone)]
 pub struct Gauss {
@@ -130,6 +179,22 @@ impl Gauss {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn binomial_bounds_match_published_values() {
+        // k = n and k = 0 have closed forms: alpha^(1/n) and 1 - alpha^(1/n)
+        let (lo, hi) = binomial_bounds(20, 20, 0.05);
+        assert!((lo - 0.05f64.powf(1.0 / 20.0)).abs() < 1e-9 && hi == 1.0);
+        let (lo, hi) = binomial_bounds(0, 20, 0.05);
+        assert!(lo == 0.0 && (hi - (1.0 - 0.05f64.powf(1.0 / 20.0))).abs() < 1e-9);
+        // 1 of 10: the upper bound solves (1 - p)^10 + 10 p (1 - p)^9 = 0.05, p = 0.3942
+        // (by hand), the lower one 1 - (1 - p)^10 = 0.05, p = 0.0051; 9 of 10 mirrors 1 of 10
+        let (lo, hi) = binomial_bounds(1, 10, 0.05);
+        assert!((hi - 0.3942).abs() < 1e-4, "{hi}");
+        assert!((lo - 0.0051).abs() < 1e-4, "{lo}");
+        let (lo, _) = binomial_bounds(9, 10, 0.05);
+        assert!((lo - (1.0 - 0.3942)).abs() < 1e-4, "{lo}");
+    }
 
     #[test]
     fn tails_match_published_values() {
