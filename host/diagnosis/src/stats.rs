@@ -181,7 +181,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn binomial_bounds_match_published_values() {
+    fn binomial_bounds_match_closed_forms_and_hand_solved_values() {
         // k = n and k = 0 have closed forms: alpha^(1/n) and 1 - alpha^(1/n)
         let (lo, hi) = binomial_bounds(20, 20, 0.05);
         assert!((lo - 0.05f64.powf(1.0 / 20.0)).abs() < 1e-9 && hi == 1.0);
