@@ -57,6 +57,22 @@ pub enum LutError {
         what: String,
         reason: String,
     },
+    /// A query at a pressure between the table's deflated node (0 kPa) and its first
+    /// inflated node, where a straight line in p_air does not describe the contact radius
+    /// (the unpressurised shell gives way under the sample), and no finer reference in
+    /// p_air was given.
+    #[error(
+        "p_air = {pressure_kpa} kPa lies between the table's deflated node ({deflated_kpa} kPa) \
+         and its first inflated node ({inflated_kpa} kPa), where interpolating across the \
+         pressure misses the contact radius by tens to hundreds of micrometres; measure at one \
+         of the table's pressures ({nodes} kPa)"
+    )]
+    DeflatedPressureGap {
+        pressure_kpa: f64,
+        deflated_kpa: f64,
+        inflated_kpa: f64,
+        nodes: String,
+    },
     /// An effect-axis value requested by a query is not one of the grid's values.
     #[error("{axis} = {value} is not on the table's grid (grid values: {grid})")]
     NotOnGrid {

@@ -17,11 +17,11 @@
 
 use std::path::{Path, PathBuf};
 
-use fit::model::{Augmentation, PhysicalDelta};
+use fit::model::{Augmentation, PhysicalDelta, PressureReference};
 use serde::{Deserialize, Serialize};
 
 use super::candidates::EffectKind;
-use super::model::{AxisSurfaces, Channel};
+use super::model::{AxisSurfaces, Channel, Surface};
 use super::tables::{EffectAxis, EffectTable, read_effect_table, shipped_tables_dir};
 
 /// The `format` field of a model file.
@@ -37,7 +37,9 @@ pub struct ModelFile {
     pub version: u32,
     /// The effects, in the order the diagnosis added them.
     pub effects: Vec<AppliedEffect>,
-    /// The effect table of the physical effect, if there is one.
+    /// The effect tables the model reads: the physical effect's, and for a manometer
+    /// offset the thickness table, whose base slice carries the table between its pressure
+    /// nodes.
     #[serde(default)]
     pub effect_tables: Vec<TableRef>,
     /// Where the model came from.
@@ -146,6 +148,21 @@ impl ModelFile {
             let kind = EffectKind::from_name(&e.effect)
                 .ok_or_else(|| format!("unknown effect {:?}", e.effect))?;
             applicable(kind).map_err(|why| format!("{}: {why}", e.effect))?;
+            // the manometer offset reads the table between its pressure nodes through the
+            // thickness table's base slice where it is given (see `TablePressureReference`)
+            if kind == EffectKind::PressureOffset
+                && let Some(t) = tables.iter().find(|t| t.axis == EffectAxis::Thickness)
+                && !effect_tables
+                    .iter()
+                    .any(|r: &TableRef| r.sha256 == t.sha256)
+            {
+                let path = std::fs::canonicalize(&t.path)
+                    .map_or_else(|_| t.path.clone(), |p| p.display().to_string());
+                effect_tables.push(TableRef {
+                    path,
+                    sha256: t.sha256.clone(),
+                });
+            }
             if let Some(axis) = table_axis(kind) {
                 let t = tables.iter().find(|t| t.axis == axis).ok_or_else(|| {
                     format!(
@@ -155,10 +172,15 @@ impl ModelFile {
                 })?;
                 let path = std::fs::canonicalize(&t.path)
                     .map_or_else(|_| t.path.clone(), |p| p.display().to_string());
-                effect_tables.push(TableRef {
-                    path,
-                    sha256: t.sha256.clone(),
-                });
+                if !effect_tables
+                    .iter()
+                    .any(|r: &TableRef| r.sha256 == t.sha256)
+                {
+                    effect_tables.push(TableRef {
+                        path,
+                        sha256: t.sha256.clone(),
+                    });
+                }
             }
         }
         let file = Self {
@@ -339,6 +361,25 @@ impl PhysicalDelta for TableDelta<'_> {
     }
 }
 
+/// The thickness table's base slice (the 7 mm sample, 1 kPa steps around the set points)
+/// as the fit's pressure reference: a manometer offset that moves the true pressure below
+/// the production table's first inflated node is read through its change, as the diagnosis
+/// read it ([`Surface::with_pressure_reference`]).
+#[derive(Debug)]
+struct TablePressureReference<'a> {
+    surface: Surface<'a>,
+}
+
+impl PressureReference for TablePressureReference<'_> {
+    fn change(&self, e: f64, from_kpa: f64, to_kpa: f64, u: f64) -> Option<(f64, f64)> {
+        if !(self.surface.covers_pressure(from_kpa) && self.surface.covers_pressure(to_kpa)) {
+            return None;
+        }
+        let c = self.surface.smoothed_change(e, from_kpa, to_kpa, u);
+        (c.a_mm.is_finite() && c.load_n.is_finite()).then_some((c.a_mm, c.load_n))
+    }
+}
+
 impl LoadedModel {
     /// Reads the model file and its effect table. A table is looked for at its recorded
     /// path, then under its file name in the shipped tables' folder; it must have the
@@ -406,7 +447,20 @@ impl LoadedModel {
                 message: format!("unknown effect {:?}", e.effect),
             })?;
             match kind {
-                EffectKind::PressureOffset => aug.pressure_offset_kpa = e.value,
+                EffectKind::PressureOffset => {
+                    aug.pressure_offset_kpa = e.value;
+                    // a model file written before the reference was recorded has no
+                    // thickness table: the fit then refuses pressures in the deflated gap
+                    if let Some(t) = self.tables.iter().find(|t| t.axis == EffectAxis::Thickness) {
+                        let surface = Surface::new(&t.lut, &t.axis.select(t.axis.base_value()))
+                            .map_err(|err| ModelFileError::Table {
+                                path: self.path.display().to_string(),
+                                table: t.path.clone(),
+                                message: err.to_string(),
+                            })?;
+                        aug.pressure_reference = Some(Box::new(TablePressureReference { surface }));
+                    }
+                }
                 EffectKind::DisplacementOffset => aug.displacement_offset_mm = e.value,
                 EffectKind::RadiusOffset => aug.radius_offset_mm = e.value,
                 EffectKind::RadiusScale => aug.radius_scale = e.value,

@@ -93,7 +93,7 @@ impl<'a> Surface<'a> {
         self.pressure_reference.is_some()
     }
 
-    fn covers_pressure(&self, p: f64) -> bool {
+    pub(crate) fn covers_pressure(&self, p: f64) -> bool {
         let (lo, hi) = (self.pressures[0], self.pressures[self.pressures.len() - 1]);
         p >= lo - 1e-9 && p <= hi + 1e-9
     }
@@ -176,7 +176,7 @@ impl<'a> Surface<'a> {
     /// u_s range so that the window stays symmetric and a linear trend is kept): a table
     /// mesh's contact edge moves from node to node in steps, at u_s positions that shift with
     /// p_air, so the change between two pressures wiggles along u_s with the element size.
-    fn smoothed_change(&self, e: f64, p0: f64, p1: f64, u: f64) -> ModelSample {
+    pub(crate) fn smoothed_change(&self, e: f64, p0: f64, p1: f64, u: f64) -> ModelSample {
         let half = match (self.u_s_range_mm(e, p0), self.u_s_range_mm(e, p1)) {
             (Some((lo0, hi0)), Some((lo1, hi1))) => REFERENCE_WINDOW_MM
                 .min(u - lo0.max(lo1))

@@ -651,6 +651,7 @@ pub fn fit_modulus(
             });
         }
         if !pressures.contains(&p.p_air_kpa) {
+            model.check_pressure(p.p_air_kpa)?;
             pressures.push(p.p_air_kpa);
         }
     }

@@ -36,6 +36,7 @@ fn augmented_values_are_the_tables_read_where_the_composition_says() {
             radius_offset_mm: 0.02,
             radius_scale: 0.04,
             physical: Some(Box::new(Bulge)),
+            pressure_reference: None,
         },
     )
     .unwrap();
