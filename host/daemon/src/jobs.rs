@@ -463,6 +463,11 @@ pub fn run_experiment(dt: &mut DeviceThread, link: &mut Link, job: Job) -> Optio
             return None;
         }
     };
+    // a pressure the fit would refuse is refused before anything is measured
+    if let Err(e) = model.check_pressure(plan.pressure_kpa) {
+        dt.finish_job(job.id, JobState::Failed, e.to_string(), None);
+        return None;
+    }
     let name = format!("{}-job{}", utc_stamp(unix_now_s()), job.id);
     let record = match RecordDir::create(&dt.shared.records_dir.join(&name)) {
         Ok(r) => r,

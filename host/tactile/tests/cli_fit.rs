@@ -88,3 +88,41 @@ fn missing_pressure_and_missing_table_exit_2() {
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("/nonexistent/table.lut"));
 }
+
+#[test]
+fn a_pressure_between_the_deflated_and_the_first_inflated_node_is_refused_with_the_tables_pressures()
+ {
+    // the direct-solve curve relabelled 3 kPa: the shipped table (0, 6, 10, ... kPa) would
+    // read it on its straight line between 0 and 6 kPa, which is far off there
+    let text = std::fs::read_to_string(data("fem_truth_E200_p6.csv")).unwrap();
+    let relabelled: Vec<String> = text
+        .lines()
+        .map(|line| {
+            if line.starts_with("# p_air_kpa") {
+                "# p_air_kpa: 3".to_string()
+            } else if line.starts_with('#') || line.starts_with("u_s_mm") {
+                line.to_string()
+            } else {
+                let mut cols: Vec<&str> = line.split(',').collect();
+                cols[3] = "3";
+                cols.join(",")
+            }
+        })
+        .collect();
+    let path = temp_file("at3kpa.csv", &relabelled.join("\n"));
+    let table = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fem-core/data/default.lut");
+    let out = tactile()
+        .arg("fit")
+        .arg(&path)
+        .arg("--lut")
+        .arg(&table)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("at3kpa.csv"), "{err}");
+    assert!(
+        err.contains("p_air = 3 kPa") && err.contains("0, 6, 10, 15, 20, 30"),
+        "{err}"
+    );
+}

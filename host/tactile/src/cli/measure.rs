@@ -126,6 +126,12 @@ pub fn run(args: MeasureArgs) -> ExitCode {
         Ok(m) => m,
         Err(e) => return input(format!("lookup table {}: {e}", lut_path.display())),
     };
+    // a set point the fit would refuse is refused before anything is measured
+    if let PressureArg::Kpa(p) = args.pressure
+        && let Err(e) = model.check_pressure(p)
+    {
+        return input(format!("--pressure: {e}"));
+    }
     let out = args.out.clone().unwrap_or_else(|| {
         PathBuf::from("records").join(format!("measure-{}", utc_stamp(unix_now_s())))
     });
