@@ -4,9 +4,11 @@
 //! interpolation differs) against the table read there (PCHIP in ln E2 and along u_s,
 //! `LutSlice::sample`).
 //!
-//! `cargo run --release -p fem-core --example interpolation_error -- TABLE [PRESSURES]`
-//! (default pressures: the table's, without 0). Per pressure: the largest and RMS
-//! |a(table) - a(direct)| over the direct curve's load steps with u_s >= 0.2 mm inside the
+//! `cargo run --release -p fem-core --example interpolation_error -- TABLE [PRESSURES]
+//! [nodes]` (default pressures: the table's, without 0). With `nodes` the curves are
+//! solved at the table's modulus nodes instead, so that at pressures between the table's
+//! pressure nodes only the interpolation across p_air differs (linear between them).
+//! Per pressure: the largest and RMS |a(table) - a(direct)| over the direct curve's load steps with u_s >= 0.2 mm inside the
 //! table's range, and where the largest sits. A table built with the edge band is solved
 //! with it (about 30 s per curve; the plain production mesh takes about 1.5 s).
 
