@@ -148,20 +148,22 @@ impl ModelFile {
             let kind = EffectKind::from_name(&e.effect)
                 .ok_or_else(|| format!("unknown effect {:?}", e.effect))?;
             applicable(kind).map_err(|why| format!("{}: {why}", e.effect))?;
+            let record = |effect_tables: &mut Vec<TableRef>, t: &EffectTable| {
+                if !effect_tables.iter().any(|r| r.sha256 == t.sha256) {
+                    let path = std::fs::canonicalize(&t.path)
+                        .map_or_else(|_| t.path.clone(), |p| p.display().to_string());
+                    effect_tables.push(TableRef {
+                        path,
+                        sha256: t.sha256.clone(),
+                    });
+                }
+            };
             // the manometer offset reads the table between its pressure nodes through the
             // thickness table's base slice where it is given (see `TablePressureReference`)
             if kind == EffectKind::PressureOffset
                 && let Some(t) = tables.iter().find(|t| t.axis == EffectAxis::Thickness)
-                && !effect_tables
-                    .iter()
-                    .any(|r: &TableRef| r.sha256 == t.sha256)
             {
-                let path = std::fs::canonicalize(&t.path)
-                    .map_or_else(|_| t.path.clone(), |p| p.display().to_string());
-                effect_tables.push(TableRef {
-                    path,
-                    sha256: t.sha256.clone(),
-                });
+                record(&mut effect_tables, t);
             }
             if let Some(axis) = table_axis(kind) {
                 let t = tables.iter().find(|t| t.axis == axis).ok_or_else(|| {
@@ -170,17 +172,7 @@ impl ModelFile {
                         e.effect
                     )
                 })?;
-                let path = std::fs::canonicalize(&t.path)
-                    .map_or_else(|_| t.path.clone(), |p| p.display().to_string());
-                if !effect_tables
-                    .iter()
-                    .any(|r: &TableRef| r.sha256 == t.sha256)
-                {
-                    effect_tables.push(TableRef {
-                        path,
-                        sha256: t.sha256.clone(),
-                    });
-                }
+                record(&mut effect_tables, t);
             }
         }
         let file = Self {

@@ -163,7 +163,7 @@ impl<'a> LutModel<'a> {
     /// them. There a straight line in p_air misses the contact radius badly: against
     /// direct solves at 3 kPa on the production mesh the chord between 0 and 6 kPa is off
     /// by 131 um RMS and up to 425 um (the deflated shell gives way under stiff samples),
-    /// while between inflated nodes 4-10 kPa apart it stays within 9.4 um, 2.9 um RMS
+    /// while between inflated nodes 4-10 kPa apart it stays within 15 um, 2.6-4.7 um RMS
     /// (`fem-core` example `interpolation_error`, docs/results.md).
     fn deflated_gap(&self, p: f64) -> Option<(f64, f64)> {
         let nodes = &self.lut.grid.pressure_kpa;

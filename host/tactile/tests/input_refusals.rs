@@ -298,3 +298,33 @@ fn a_curve_that_stops_early_keeps_its_converged_steps() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn a_set_point_in_the_tables_deflated_gap_is_refused_before_measuring() {
+    // 3 kPa lies between the shipped table's 0 and 6 kPa nodes, where the fit cannot read
+    // the table: refused before the controller is even opened, and no record folder made
+    let dir = scratch("deflated-gap");
+    let calibration = dir.join("calibration-1000.json");
+    let record = experiment::calibration::CalibrationRecord::new("SIM-0000000000000003", "0.1.0");
+    std::fs::write(&calibration, serde_json::to_string(&record).unwrap()).unwrap();
+    let table = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fem-core/data/default.lut");
+    let out = tactile()
+        .args(["measure", "--port", "/dev/null", "--camera", "/dev/null"])
+        .args(["--start", "1", "--pressure", "3"])
+        .arg("--calibration")
+        .arg(&calibration)
+        .arg("--lut")
+        .arg(&table)
+        .arg("--out")
+        .arg(dir.join("record"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    let err = stderr(&out);
+    assert!(
+        err.contains("--pressure") && err.contains("p_air = 3 kPa") && err.contains("0, 6, 10"),
+        "{err}"
+    );
+    assert!(!dir.join("record").exists(), "a record folder was made");
+    std::fs::remove_dir_all(&dir).ok();
+}
