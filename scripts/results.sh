@@ -34,6 +34,7 @@ sections=(
     "converged-truth@@@@scripts/converged_truth_fit.sh"
     "interpolation@@^(fem-core|p_air)@@for t in default default-fine; do cargo run -q --release -p fem-core --example interpolation_error -- fem-core/data/\$t.lut 6,15; done"
     "pressure-interpolation@@^(fem-core|p_air)@@cargo run -q --release -p fem-core --example interpolation_error -- fem-core/data/default.lut 3,8,12.5,17.5,25 nodes"
+    "pressure-term@@^(the shipped|p_air|summary)@@cargo run -q --release -p fit --example pressure_interpolation_term"
     "snap-through@@^(E2|snap|solve time)@@for e in 681.3 1000; do echo \"E2 = \$e kPa, p_air = 0:\"; RAYON_NUM_THREADS=1 cargo run -q --release -p fem-core --example curve -- \$e 0 0 40 2; done"
     "fem-speed@@^(stage|curve solve)@@RAYON_NUM_THREADS=1 cargo run -q --release -p fem-core --example solver_trace -- 200 6 0"
     "diagnosis@@^(false positives|E2|overall|correlation)@@cargo test -q --release -p system-tests --test diagnose_null -- --ignored --nocapture --test-threads=1 && NULL_MODULUS_KPA=25 cargo test -q --release -p system-tests --test diagnose_null -- --ignored --nocapture --test-threads=1; DIAG_CONVERGED=1 cargo test -q --release -p system-tests --test diagnose_table_error -- --ignored --nocapture --test-threads=1 loo_calibration pressure_continuation_error"

@@ -400,6 +400,36 @@ fn stop_and_recover(name: &str, cycles: usize) {
     let _ = std::fs::remove_dir_all(&b.dir);
 }
 
+/// A set point between the table's deflated node and its first inflated one (3 kPa: the
+/// shipped table has 0 and 6 kPa) fails the job at its start with the table's message,
+/// before a record is opened or the pump runs; the next job at a table pressure runs.
+#[test]
+fn a_set_point_in_the_tables_deflated_gap_fails_before_anything_is_measured() {
+    let b = calibrated("daemon-gap");
+    let mut request = short_run(1);
+    request.pressure_kpa = 3.0.into();
+    let job = b.client.submit(&request).unwrap();
+    let done = wait_job(&b.client, job.id, Duration::from_secs(20));
+    assert_eq!(done.state, JobState::Failed, "{done:?}");
+    assert!(
+        done.message.contains("p_air = 3 kPa")
+            && done.message.contains("first inflated node (6 kPa)"),
+        "{done:?}"
+    );
+    assert!(done.record.is_none(), "{done:?}");
+    let records: Vec<_> = std::fs::read_dir(b.dir.join("records"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .filter(|n| n != "calibrations")
+        .collect();
+    assert!(records.is_empty(), "{records:?}");
+    let next = b.client.submit(&short_run(1)).unwrap();
+    let next = wait_job(&b.client, next.id, Duration::from_secs(60));
+    assert_eq!(next.state, JobState::Complete, "{next:?}");
+    b.daemon.shutdown();
+    let _ = std::fs::remove_dir_all(&b.dir);
+}
+
 /// The daemon recovers from an emergency stop mid-experiment and while idle (3 cycles in
 /// the default suite; the 20-cycle run is `stop_and_recover_20_times`).
 #[test]

@@ -240,6 +240,57 @@ impl<'a> LutModel<'a> {
         Ok(s)
     }
 
+    /// The estimated error of the table's straight line in p_air at (E2, p_air, u_s) as
+    /// the instrument reads it (mm of a), `None` at a pressure node, outside the inflated
+    /// nodes, or where fewer than three inflated nodes answer.
+    ///
+    /// Between inflated nodes p_k < p < p_(k+1) the straight line's error is
+    /// (1/2) a''(xi) (p - p_k)(p - p_(k+1)). With a third inflated node q beside the
+    /// bracket, the parabola through the three minus the line is
+    /// `a[p_k, p_(k+1), q] (p - p_k)(p - p_(k+1))` (the second divided difference estimates
+    /// a''/2). Of the two possible third nodes the one giving the larger change is taken (a
+    /// conservative estimate); the deflated node is never used, the shell's response bends
+    /// there (see [`Self::check_pressure`]).
+    pub fn pressure_curvature_mm(
+        &self,
+        modulus_kpa: f64,
+        p_air_kpa: f64,
+        u_s_mm: f64,
+    ) -> Option<f64> {
+        let aug = &self.augmentation;
+        let (p, u) = (
+            p_air_kpa - aug.pressure_offset_kpa,
+            u_s_mm - aug.displacement_offset_mm,
+        );
+        let inflated: Vec<f64> = self
+            .lut
+            .grid
+            .pressure_kpa
+            .iter()
+            .copied()
+            .filter(|&q| q > 0.0)
+            .collect();
+        let k = inflated.iter().position(|&q| q > p)?.checked_sub(1)?;
+        let (p0, p1) = (inflated[k], inflated[k + 1]);
+        if p - p0 < 1e-9 || p1 - p < 1e-9 {
+            return None;
+        }
+        let a = |q: f64| self.read(modulus_kpa, q, u).ok().map(|s| s.a_mm);
+        let (a0, a1) = (a(p0)?, a(p1)?);
+        let slope = (a1 - a0) / (p1 - p0);
+        let thirds = [k.checked_sub(1), Some(k + 2)];
+        let change = thirds
+            .into_iter()
+            .flatten()
+            .filter_map(|j| {
+                let q = *inflated.get(j)?;
+                let divided = ((a(q)? - a0) / (q - p0) - slope) / (q - p1);
+                Some(divided * (p - p0) * (p - p1))
+            })
+            .max_by(|x, y| x.abs().total_cmp(&y.abs()))?;
+        Some((1.0 + aug.radius_scale) * change)
+    }
+
     /// The u_s range answerable at (E2, p_air) without clamping (as read by the
     /// instrument: shifted by the displacement offset of the augmentation).
     pub fn u_s_range_mm(&self, modulus_kpa: f64, p_air_kpa: f64) -> Result<(f64, f64), LutError> {

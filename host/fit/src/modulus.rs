@@ -24,6 +24,10 @@
 //!   |ln E2(PCHIP) - ln E2(linear)| is taken as the half-width (a conservative bound:
 //!   linear interpolation's error is second order in the node spacing, PCHIP's higher).
 //!
+//! - the table's straight line in p_air between pressure nodes, added in quadrature: the
+//!   parabola through the bracketing nodes and a third one estimates that line's error at
+//!   each point, projected on ln E2 (0 when every point lies at a pressure node).
+//!
 //! Model error (a wrong friction, thickness, ...) and calibration error are not in the
 //! interval: they are systematic and are what the diagnosis looks for.
 
@@ -143,6 +147,9 @@ pub struct ModulusFit {
     pub modulus_linear_interpolation_kpa: f64,
     /// Half-width (in ln E2) added in quadrature for the table's interpolation error.
     pub interpolation_half_width_ln: f64,
+    /// Half-width (in ln E2) added in quadrature for the table's straight line in p_air
+    /// between its pressure nodes (0 when every point lies at a node).
+    pub pressure_interpolation_half_width_ln: f64,
     /// The model's discretisation term (the estimated bias ln E - ln E(finer mesh)) when a
     /// finer table was available ([`crate::discretisation`]): subtracted from the estimate
     /// when the finer table is converged, else added in quadrature to the interval.
@@ -621,6 +628,31 @@ fn lag1_correlation(points: &[FitPoint], used: &[usize], residuals: &[f64]) -> f
     (cov / var).clamp(-0.99, 0.99)
 }
 
+/// The table's straight line in p_air carried into ln E2: each used point's estimated
+/// error of that line, delta_i ([`LutModel::pressure_curvature_mm`], 0 at a pressure node),
+/// projected on the fit's sensitivity s_i = d a / d ln E2 at the estimate,
+/// `|sum s_i delta_i| / sum s_i^2` (to first order, the shift of a least-squares fit of
+/// ln E2 when every a_i moves by delta_i).
+fn pressure_interpolation_ln(
+    model: &LutModel<'_>,
+    points: &[FitPoint],
+    used: &[usize],
+    modulus_kpa: f64,
+) -> f64 {
+    let (mut num, mut den) = (0.0, 0.0);
+    for p in used.iter().map(|&i| &points[i]) {
+        let Ok(s) = model.sample(modulus_kpa, p.p_air_kpa, p.u_s_mm) else {
+            continue;
+        };
+        let slope = s.da_dln_modulus_mm;
+        den += slope * slope;
+        if let Some(delta) = model.pressure_curvature_mm(modulus_kpa, p.p_air_kpa, p.u_s_mm) {
+            num += slope * delta;
+        }
+    }
+    if den > 0.0 { (num / den).abs() } else { 0.0 }
+}
+
 /// Fits E2 to `points` (any number of pressures and replicates).
 pub fn fit_modulus(
     model: &LutModel<'_>,
@@ -787,23 +819,27 @@ pub fn fit_modulus(
         .unwrap_or(core.x);
     a_only.linear.set(false);
     let half_interp = (core.x - x_linear).abs();
+    let half_pressure = pressure_interpolation_ln(model, points, &core.used, core.x.exp());
+    let half_tables = half_interp.hypot(half_pressure);
+    let tables_note = format!(
+        "plus in quadrature the table interpolation terms |ln E(PCHIP) - ln E(linear in ln E2)| = {half_interp:.4} and, across p_air, {half_pressure:.4}"
+    );
     let (half, method, description) = if half_rep > half_resid {
         (
-            half_rep.hypot(half_interp),
+            half_rep.hypot(half_tables),
             CiMethod::Replicates,
             format!(
-                "between-replicate scatter of {} per-replicate fits (standard error of the mean ln E2, Student t with {} dof); larger than the residual-model interval; plus in quadrature the table interpolation term |ln E(PCHIP) - ln E(linear in ln E2)| = {:.4}",
+                "between-replicate scatter of {} per-replicate fits (standard error of the mean ln E2, Student t with {} dof); larger than the residual-model interval; {tables_note}",
                 replicate_moduli.len(),
                 replicate_moduli.len() - 1,
-                half_interp
             ),
         )
     } else {
         (
-            half_resid.hypot(half_interp),
+            half_resid.hypot(half_tables),
             CiMethod::ResidualAr1,
             format!(
-                "residual variance with AR(1) within-curve correlation (lag-1 rho = {rho:.2}, {n_eff:.1} effective of {n} points, Student t){}; plus in quadrature the table interpolation term |ln E(PCHIP) - ln E(linear in ln E2)| = {half_interp:.4}",
+                "residual variance with AR(1) within-curve correlation (lag-1 rho = {rho:.2}, {n_eff:.1} effective of {n} points, Student t){}; {tables_note}",
                 if replicate_moduli.len() >= 2 {
                     "; larger than the between-replicate interval"
                 } else {
@@ -858,6 +894,7 @@ pub fn fit_modulus(
         iterations: core.iterations,
         modulus_linear_interpolation_kpa: x_linear.exp(),
         interpolation_half_width_ln: half_interp,
+        pressure_interpolation_half_width_ln: half_pressure,
         discretisation_bias_ln: None,
         modulus_production_kpa: None,
         discretisation_residual_ln: None,
