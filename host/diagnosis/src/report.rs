@@ -48,6 +48,18 @@ pub fn text(d: &Diagnosis) -> String {
             p_text(c.modulus_p_value),
             c.load_modulus_kpa
         );
+        let level = super::consistency::test_level(c.parameters.len());
+        for q in c.parameters.iter().filter(|q| q.p_value < level) {
+            let _ = writeln!(
+                s,
+                "  and they read {} differently: {:.4} from the radius, {:.4} from the load given the radius (z = {:+.2}, p {})",
+                q.effect,
+                q.radius,
+                q.load_given_radius,
+                q.z,
+                p_text(q.p_value)
+            );
+        }
         let _ = writeln!(
             s,
             "  where: {}",
@@ -468,7 +480,7 @@ fn consistency_text(s: &mut String, d: &Diagnosis) {
             },
             c.modulus_z,
             p_text(c.modulus_p_value),
-            if c.agree {
+            if c.modulus_p_value >= super::consistency::test_level(c.parameters.len()) {
                 "they agree on the modulus"
             } else {
                 "they disagree on the modulus"
@@ -480,6 +492,20 @@ fn consistency_text(s: &mut String, d: &Diagnosis) {
             c.statistic_99,
             p_text(c.p_value)
         );
+        for q in &c.parameters {
+            let _ = writeln!(
+                s,
+                "    {}: {:.4} +- {:.4} from the radius, {:.4} +- {:.4} from the load given the radius (table allowance {:.4}): z = {:+.2}, p {}",
+                q.effect,
+                q.radius,
+                q.radius_se,
+                q.load_given_radius,
+                q.load_given_radius_se,
+                q.allowance,
+                q.z,
+                p_text(q.p_value)
+            );
+        }
         for cell in c.cells.iter().filter(|c| c.flagged) {
             let _ = writeln!(
                 s,
