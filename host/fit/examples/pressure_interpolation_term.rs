@@ -11,7 +11,8 @@
 
 use fem_core::Simulation;
 use fem_core::lut::read_lut;
-use fit::{FitOptions, FitPoint, LutModel, fit_modulus};
+use fit::points::points_from_solved_curve;
+use fit::{FitOptions, LutModel, fit_modulus};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let pressures: Vec<f64> = match std::env::args().nth(1) {
@@ -42,18 +43,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             params.sample_modulus_kpa = e;
             params.pressure_kpa = p;
             let curve = Simulation::new(&params).solve()?.curve;
-            let points: Vec<FitPoint> = curve
-                .points
-                .iter()
-                .filter(|pt| pt.u_s_mm >= 0.2 && pt.a_mm > 0.0)
-                .map(|pt| FitPoint {
-                    u_s_mm: pt.u_s_mm,
-                    a_mm: pt.a_mm,
-                    p_air_kpa: p,
-                    test: 0,
-                    load_n: None,
-                })
-                .collect();
+            let points = points_from_solved_curve(&curve, 0.2);
             let fit = match fit_modulus(&model, &points, FitOptions::default()) {
                 Ok(f) => f,
                 Err(err) => {

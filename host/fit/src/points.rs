@@ -65,3 +65,20 @@ pub fn points_from_curve_csv(curve: &CurveCsv, file: &str) -> Result<Vec<FitPoin
     }
     Ok(out)
 }
+
+/// The points of a solved fem-core curve at its pressure, noise-free: the load steps in
+/// contact with u_s at least `min_u_s_mm` (one replicate, with loads).
+pub fn points_from_solved_curve(curve: &fem_core::Curve, min_u_s_mm: f64) -> Vec<FitPoint> {
+    curve
+        .points
+        .iter()
+        .filter(|pt| pt.u_s_mm >= min_u_s_mm && pt.a_mm > 0.0)
+        .map(|pt| FitPoint {
+            u_s_mm: pt.u_s_mm,
+            a_mm: pt.a_mm,
+            p_air_kpa: curve.params.pressure_kpa,
+            test: 0,
+            load_n: Some(pt.load_n),
+        })
+        .collect()
+}

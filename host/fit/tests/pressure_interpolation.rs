@@ -6,6 +6,7 @@
 
 use fem_core::Simulation;
 use fem_core::lut::{EffectSelection, LutQuery, OutOfRange, read_lut};
+use fit::points::points_from_solved_curve;
 use fit::{FitOptions, FitPoint, LutModel, fit_modulus};
 
 /// The estimate equals the parabola through the bracketing nodes and a third inflated node
@@ -81,18 +82,7 @@ fn the_term_has_the_size_of_the_error_a_direct_solve_shows_and_the_interval_cove
     params.sample_modulus_kpa = e;
     params.pressure_kpa = p;
     let curve = Simulation::new(&params).solve().unwrap().curve;
-    let points: Vec<FitPoint> = curve
-        .points
-        .iter()
-        .filter(|pt| pt.u_s_mm >= 0.2 && pt.a_mm > 0.0)
-        .map(|pt| FitPoint {
-            u_s_mm: pt.u_s_mm,
-            a_mm: pt.a_mm,
-            p_air_kpa: p,
-            test: 0,
-            load_n: None,
-        })
-        .collect();
+    let points = points_from_solved_curve(&curve, 0.2);
     let fit = fit_modulus(&model, &points, FitOptions::default()).unwrap();
     let error_ln = (fit.modulus_kpa / e).ln();
     let term = fit.pressure_interpolation_half_width_ln;
