@@ -22,8 +22,7 @@
 //! - the table's interpolation in ln E2, added in quadrature: the points are fitted again
 //!   with the table interpolated linearly in ln E2 between its nodes, and
 //!   |ln E2(PCHIP) - ln E2(linear)| is taken as the half-width (a conservative bound:
-//!   linear interpolation's error is second order in the node spacing, PCHIP's higher).
-//!
+//!   linear interpolation's error is second order in the node spacing, PCHIP's higher);
 //! - the table's straight line in p_air between pressure nodes, added in quadrature: the
 //!   parabola through the bracketing nodes and a third one estimates that line's error at
 //!   each point, projected on ln E2 (0 when every point lies at a pressure node).
