@@ -401,22 +401,37 @@ fn stop_and_recover(name: &str, cycles: usize) {
 }
 
 /// A set point between the table's deflated node and its first inflated one (3 kPa: the
-/// shipped table has 0 and 6 kPa) fails the job at its start with the table's message,
-/// before a record is opened or the pump runs; the next job at a table pressure runs.
+/// shipped table has 0 and 6 kPa) is refused at submission (422, naming the field, with the
+/// table's message), as is an automatic choice whose probe would run there; no job is
+/// queued, no record opened; the next job at a table pressure runs.
 #[test]
-fn a_set_point_in_the_tables_deflated_gap_fails_before_anything_is_measured() {
+fn a_set_point_in_the_tables_deflated_gap_is_refused_at_submission() {
     let b = calibrated("daemon-gap");
     let mut request = short_run(1);
     request.pressure_kpa = 3.0.into();
-    let job = b.client.submit(&request).unwrap();
-    let done = wait_job(&b.client, job.id, Duration::from_secs(20));
-    assert_eq!(done.state, JobState::Failed, "{done:?}");
-    assert!(
-        done.message.contains("p_air = 3 kPa")
-            && done.message.contains("first inflated node (6 kPa)"),
-        "{done:?}"
-    );
-    assert!(done.record.is_none(), "{done:?}");
+    let mut auto = short_run(1);
+    auto.pressure_kpa = daemon::api::PressureSetting::Auto;
+    auto.probe_pressure_kpa = Some(3.0);
+    for (request, field) in [(request, "pressure_kpa"), (auto, "probe_pressure_kpa")] {
+        let refusal = b.client.submit(&request).expect_err("refused");
+        match &refusal {
+            daemon::client::ClientError::Api { status, fields, .. } => {
+                assert_eq!(*status, 422);
+                assert_eq!(fields.len(), 1, "{fields:?}");
+                assert_eq!(fields[0].field, field);
+                assert!(
+                    fields[0].reason.contains("p_air = 3 kPa")
+                        && fields[0].reason.contains("first inflated node (6 kPa)"),
+                    "{fields:?}"
+                );
+            }
+            other => panic!("refused otherwise: {other:?}"),
+        }
+        // what `tactile run` prints names the field and the table's reason
+        let text = refusal.to_string();
+        assert!(text.contains(&format!("{field}: p_air = 3 kPa")), "{text}");
+    }
+    assert!(b.client.jobs().unwrap().is_empty());
     let records: Vec<_> = std::fs::read_dir(b.dir.join("records"))
         .unwrap()
         .map(|e| e.unwrap().file_name())

@@ -13,7 +13,7 @@ use super::api::{ApiError, Event, ExperimentRequest, Job, StatusReport, StopRepo
 pub enum ClientError {
     #[error("cannot reach the daemon at {addr}: {reason} (is `tactile daemon` running?)")]
     Unreachable { addr: String, reason: String },
-    #[error("daemon answered {status}: {message}")]
+    #[error("daemon answered {status}: {message}{}", fields_text(fields))]
     Api {
         status: u16,
         message: String,
@@ -23,6 +23,14 @@ pub enum ClientError {
     Decode(String),
     #[error(transparent)]
     Token(#[from] super::token::TokenError),
+}
+
+/// `; field: reason` for each field the daemon refused.
+fn fields_text(fields: &[super::api::FieldError]) -> String {
+    fields
+        .iter()
+        .map(|f| format!("; {}: {}", f.field, f.reason))
+        .collect()
 }
 
 /// An HTTP answer: status and body.

@@ -132,6 +132,7 @@ impl DeviceThread {
             }
             None => None,
         };
+        shared.set_fit_model(Arc::clone(&lut), setup_model.clone());
         let fit = FitWorker::start(
             Arc::clone(&lut),
             setup_model.clone(),

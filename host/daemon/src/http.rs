@@ -30,7 +30,7 @@ use tokio::sync::{broadcast, oneshot};
 
 use super::api::{
     ApiError, Event, ExperimentRequest, FieldError, JobKind, MAX_BODY_BYTES, PressureRequest,
-    StopReport, VentRequest,
+    PressureSetting, StopReport, VentRequest,
 };
 use super::dashboard::session::DashboardAuth;
 use super::guarded_transport::StopKind;
@@ -374,6 +374,16 @@ async fn emergency_stop(State(app): State<App>) -> Response {
 async fn submit_experiment(State(app): State<App>, Body(req): Body<ExperimentRequest>) -> Response {
     if let Err(fields) = req.validate() {
         return field_errors(fields);
+    }
+    if let Some(reason) = app.shared.pressure_refusal(&req) {
+        let field = match (req.pressure_kpa, req.probe_pressure_kpa) {
+            (PressureSetting::Auto, Some(_)) => "probe_pressure_kpa",
+            _ => "pressure_kpa",
+        };
+        return field_errors(vec![FieldError {
+            field: field.into(),
+            reason,
+        }]);
     }
     let job = app.shared.submit(JobKind::Experiment, Some(req));
     (StatusCode::ACCEPTED, Json(job)).into_response()

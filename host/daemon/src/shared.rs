@@ -4,13 +4,15 @@
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::Sender;
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
 
 use tokio::sync::{broadcast, oneshot};
 
 use super::api::{Event, ExperimentRequest, Job, JobKind, JobState, StatusReport};
 use super::guarded_transport::StopSwitch;
+use diagnosis::applied::LoadedModel;
 use experiment::records::unix_now_s;
+use fem_core::lut::Lut;
 
 /// Why the device thread did not carry out a command.
 #[derive(Debug, thiserror::Error)]
@@ -61,6 +63,9 @@ pub struct Shared {
     /// Calibration jobs are possible (simulated bench).
     pub can_calibrate: bool,
     pub emergency_stops: AtomicU64,
+    /// The fit's table and the setup's model, once the device thread has loaded them: a
+    /// submitted experiment's pressure is checked against them.
+    fit_model: OnceLock<(Arc<Lut>, Option<Arc<LoadedModel>>)>,
     state: Mutex<State>,
 }
 
@@ -86,12 +91,32 @@ impl Shared {
             calibrations_dir,
             can_calibrate,
             emergency_stops: AtomicU64::new(0),
+            fit_model: OnceLock::new(),
             state: Mutex::new(State {
                 status,
                 next_id: 1,
                 ..State::default()
             }),
         }
+    }
+
+    /// Records the fit's table and the setup's model (the first call wins: both are fixed
+    /// for the daemon's life).
+    pub fn set_fit_model(&self, lut: Arc<Lut>, model: Option<Arc<LoadedModel>>) {
+        let _ = self.fit_model.set((lut, model));
+    }
+
+    /// The reason the fit could not be read at the first pressure `request` sets (its set
+    /// point, or the probe's with `"auto"`), as the job would fail at its start: a pressure
+    /// in the table's deflated gap without a pressure reference. `None` when it can, or
+    /// before the model is known.
+    pub fn pressure_refusal(&self, request: &ExperimentRequest) -> Option<String> {
+        let (lut, model) = self.fit_model.get()?;
+        let model = super::fit_worker::fit_model(lut, model.as_deref()).ok()?;
+        model
+            .check_pressure(request.first_pressure_kpa())
+            .err()
+            .map(|e| e.to_string())
     }
 
     /// The state (a poisoned lock still holds valid data: every update is a plain store).
