@@ -299,6 +299,13 @@ fn run_selection(
     })
 }
 
+/// The load channel's chi2 per value under the baseline above which a diagnosis that
+/// names nothing is `unexplained`: the radius fits, the load does not. Clean data gave
+/// 0.76-0.92 on 28 bench-path records at 170 kPa and 0.87-1.11 on table-generated curves
+/// at 20-1000 kPa (10 cases); a pressure leak of 0.3 kPa/s that named nothing gave 2.8 and
+/// 4.8 (docs/diagnosis.md, step 8).
+pub const LOAD_LACK_OF_FIT_LIMIT: f64 = 2.0;
+
 /// Diagnoses `points` against the baseline table `base` and the effect tables.
 pub fn diagnose(
     base: &Lut,
@@ -467,13 +474,41 @@ pub fn diagnose(
         &model, &cands, &points, &subset, &noise, &whitener, options, &first,
     );
     let outside_library = forward.consistency.as_ref().is_some_and(|c| !c.agree);
-    let verdict = if outside_library {
+    // ... and when nothing is named because the radius fits the baseline, whether the load
+    // does too (an effect that the radius does not show, such as a leak's falling pressure)
+    let load_lack_of_fit = load
+        .as_ref()
+        .map(|lc| lc.baseline_chi2 / lc.whitener.len().max(1) as f64);
+    let load_unfitted = decision.verdict == Verdict::None
+        && load_lack_of_fit.is_some_and(|v| v > LOAD_LACK_OF_FIT_LIMIT);
+    let verdict = if outside_library || load_unfitted {
         Verdict::Unexplained
     } else {
         decision.verdict
     };
     if outside_library {
         notes.push("the effects the selection found do not reconcile the radius with the load (see \"radius and load under\"): an effect outside the library; the forward selection is shown as tried, and nothing is named".into());
+    }
+    if let (true, Some(v)) = (load_unfitted, load_lack_of_fit) {
+        let flagged: Vec<String> = localisation
+            .cells
+            .iter()
+            .filter(|c| c.flagged && c.channel != "a")
+            .map(|c| {
+                format!(
+                    "{} kPa, u_s {:.2}..{:.2} mm (z {:+.1})",
+                    c.p_air_kpa, c.u_s_range_mm[0], c.u_s_range_mm[1], c.z
+                )
+            })
+            .collect();
+        notes.push(format!(
+            "unexplained: the baseline fits the radius but not the load (load chi2/value {v:.2}, above {LOAD_LACK_OF_FIT_LIMIT:.1}) and no effect of the library passes on the radius: an effect outside the library, or one the radius does not show{}",
+            if flagged.is_empty() {
+                String::new()
+            } else {
+                format!("; the load disagrees at {}", flagged.join(", "))
+            }
+        ));
     }
 
     // 7. confidence: rerun the selection on data simulated from the augmented fit
