@@ -494,19 +494,14 @@ pub fn diagnose(
             .cells
             .iter()
             .filter(|c| c.flagged && c.channel != "a")
-            .map(|c| {
-                format!(
-                    "{} kPa, u_s {:.2}..{:.2} mm (z {:+.1})",
-                    c.p_air_kpa, c.u_s_range_mm[0], c.u_s_range_mm[1], c.z
-                )
-            })
+            .map(Cell::describe)
             .collect();
         notes.push(format!(
             "unexplained: the baseline fits the radius but not the load (load chi2/value {v:.2}, above {LOAD_LACK_OF_FIT_LIMIT:.1}) and no effect of the library passes on the radius: an effect outside the library, or one the radius does not show{}",
             if flagged.is_empty() {
                 String::new()
             } else {
-                format!("; the load disagrees at {}", flagged.join(", "))
+                format!("; it disagrees in {}", flagged.join(", "))
             }
         ));
     }

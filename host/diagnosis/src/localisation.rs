@@ -37,6 +37,24 @@ pub struct Cell {
     pub flagged: bool,
 }
 
+impl Cell {
+    /// "load at 6 kPa, u_s 0.47..0.88 mm (z -4.1)": where the window lies and how far off.
+    pub fn describe(&self) -> String {
+        format!(
+            "{} at {} kPa, u_s {:.2}..{:.2} mm (z {:+.1})",
+            if self.channel == "a" {
+                "radius"
+            } else {
+                "load"
+            },
+            self.p_air_kpa,
+            self.u_s_range_mm[0],
+            self.u_s_range_mm[1],
+            self.z
+        )
+    }
+}
+
 /// Apparent modulus of one subset.
 #[derive(Debug, Clone, Serialize)]
 pub struct ApparentModulus {
@@ -281,4 +299,36 @@ pub fn trend(moduli: &[ApparentModulus]) -> Option<f64> {
     let my = pts.iter().map(|p| p.1).sum::<f64>() / n;
     let sxx: f64 = pts.iter().map(|p| (p.0 - mx).powi(2)).sum();
     (sxx > 0.0).then(|| pts.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum::<f64>() / sxx)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_cell_names_its_channel_pressure_window_and_z() {
+        let cell = Cell {
+            channel: "P".into(),
+            p_air_kpa: 6.0,
+            u_s_range_mm: [0.471, 0.884],
+            points: 64,
+            mean_whitened: -1.27,
+            rms_whitened: 1.58,
+            mean_residual: -0.0031,
+            z: -4.14,
+            chi2_p: 1e-6,
+            flagged: true,
+        };
+        assert_eq!(cell.describe(), "load at 6 kPa, u_s 0.47..0.88 mm (z -4.1)");
+        let radius = Cell {
+            channel: "a".into(),
+            p_air_kpa: 15.0,
+            z: 2.56,
+            ..cell
+        };
+        assert_eq!(
+            radius.describe(),
+            "radius at 15 kPa, u_s 0.47..0.88 mm (z +2.6)"
+        );
+    }
 }

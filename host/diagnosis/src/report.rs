@@ -27,16 +27,7 @@ pub fn text(d: &Diagnosis) -> String {
             .cells
             .iter()
             .filter(|c| c.flagged)
-            .map(|c| {
-                format!(
-                    "{} at {} kPa, u_s {:.2}..{:.2} mm (z {:+.1})",
-                    if c.channel == "a" { "radius" } else { "load" },
-                    c.p_air_kpa,
-                    c.u_s_range_mm[0],
-                    c.u_s_range_mm[1],
-                    c.z
-                )
-            })
+            .map(super::localisation::Cell::describe)
             .collect();
         let _ = writeln!(
             s,
