@@ -11,8 +11,10 @@ is (z, r). Outputs per depth: the contact radius a (linear extrapolation of g^(2
 the first two open outer-surface nodes, the (r - a)^(3/2) gap law), the load P (the plane's
 reaction) and u_s (inner apex displacement relative to the tube, zero after inflation).
 Every case is solved on a sequence of meshes (elements along the arc and through the wall
-doubled each time), so felupe's own mesh convergence is printed next to fem-core's curve
-(`cargo run --release -p fem-core --example curve -- 1e7 P 0 34 1.7`).
+doubled each time), so felupe's own mesh convergence is printed next to fem-core's curves
+(`tactile fem curve --modulus 1e7 --pressure P --depth 1.7 --steps 34`, on the production
+mesh and with `--edge-band`). Then, side by side on one core, each solver's time per curve
+and its largest difference in a from the edge band's converged a.
 
 Usage: scripts/fem_crosscheck_felupe.sh [--pressures 0,6,15] [--levels 40,80,160]
 Units: mm, kPa, mN (printed loads in N).
@@ -20,10 +22,23 @@ Units: mm, kPa, mN (printed loads in N).
 
 import argparse
 import math
+import os
+import re
 import subprocess
 import sys
+import time
+import warnings
 
 import numpy as np
+
+# a Newton attempt that fails (it is then cut) warns of NaNs and singular matrices
+warnings.filterwarnings("ignore", category=RuntimeWarning)
+try:
+    from scipy.sparse.linalg import MatrixRankWarning
+
+    warnings.filterwarnings("ignore", category=MatrixRankWarning)
+except ImportError:
+    pass
 
 try:
     import felupe as fem
@@ -85,7 +100,7 @@ def solve(p_air, n_arc, n_thick, multiplier=10.0, steps_per_mm=20, verbose=False
     def newton(items):
         dof0, dof1 = fem.dof.partition(field, bounds)
         ext0 = fem.dof.apply(field, bounds, dof0)
-        return fem.newtonrhapson(items=items, x0=field, dof1=dof1, dof0=dof0, ext0=ext0, verbose=0, tol=1e-8, maxiter=40)
+        return fem.newtonraphson(items=items, x0=field, dof1=dof1, dof0=dof0, ext0=ext0, verbose=0, tol=1e-8, maxiter=40)
 
     for p in np.linspace(0.0, p_air, 4)[1:]:
         pressure.update(p)
@@ -154,19 +169,48 @@ def contact_radius(r, g):
     return float(max(r[j] - d * (r[j + 1] - r[j]), r[closed[-1]]))
 
 
-def femcore(p_air):
-    """fem-core's curve at the same depths (34 steps to 1.7 mm, E2 = 1e7 kPa: rigid)."""
-    cmd = ["cargo", "run", "-q", "--release", "-p", "fem-core", "--example", "curve", "--",
-           "1e7", str(p_air), "0", "34", "1.7"]
-    text = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
+def femcore(p_air, edge_band=False):
+    """fem-core's curve at the same depths (34 steps to 1.7 mm, E2 = 1e7 kPa: rigid), on the
+    production mesh or with the band of fine elements at the contact edge; rows by h and the
+    solve's wall time (s, one core, the solver's own figure)."""
+    exe = "target/release/tactile"
+    out = "target/felupe-crosscheck-femcore.csv"
+    cmd = [exe, "fem", "curve", "--modulus", "1e7", "--pressure", str(p_air), "--depth", "1.7",
+           "--steps", "34", "--out", out] + (["--edge-band"] if edge_band else [])
+    env = dict(os.environ, RAYON_NUM_THREADS="1")
+    text = subprocess.run(cmd, check=True, capture_output=True, text=True, env=env)
+    seconds = float(re.search(r"steps, ([0-9.]+) s\)", text.stdout + text.stderr).group(1))
     rows = {}
-    for line in text.splitlines():
-        try:
-            h, us, a, load = (float(v) for v in line.split()[:4])
-        except ValueError:
-            continue
-        rows[round(h, 4)] = (a, load, us)
-    return rows
+    with open(out) as f:
+        for line in f:
+            if line.startswith("#") or line.startswith("u_s_mm"):
+                continue
+            us, a, load, _p, _phase, h = line.split(",")[:6]
+            rows[round(float(h), 4)] = (float(a), float(load), float(us))
+    return rows, seconds
+
+
+def speed_table(p_air, levels, res, times, production, band):
+    """Time per curve against the largest difference in a from the converged reference (the
+    fem-core band) over the depths every solver reached."""
+    (ref, t_band), (prod, t_prod) = band, production
+    print(f"  speed at {p_air:g} kPa (one core; a against fem-core's edge band, two elements through the wall):")
+    print("    solver              time s   largest |a - a_band| um, largest in % of a, depths compared")
+
+    def err(rows):
+        d = [(abs(a - ref[round(h, 4)][0]) * 1e3, abs(a / ref[round(h, 4)][0] - 1) * 100)
+             for h, a in rows if round(h, 4) in ref]
+        return ((max(v[0] for v in d), max(v[1] for v in d)), len(d)) if d else (None, 0)
+
+    for n in levels:
+        (e, n_d) = err([(r[0], r[1]) for r in res[n]])
+        es = f"{e[0]:7.1f}, {e[1]:.2f} %, {n_d}" if e else "   -"
+        print(f"    felupe {n:<12d} {times[n]:7.1f}   {es}")
+    (e, n_d) = err([(h, v[0]) for h, v in prod.items() if any(abs(h - d) < 1e-9 for d in DEPTHS)])
+    print(f"    fem-core production {t_prod:7.1f}   {e[0]:7.1f}, {e[1]:.2f} %, {n_d}")
+    print(f"    fem-core edge band  {t_band:7.1f}   (the reference)")
+    finest = levels[-1]
+    print(f"    felupe {finest} / fem-core edge band: {times[finest] / t_band:.1f} times the time")
 
 
 def main():
@@ -178,21 +222,31 @@ def main():
     ap.add_argument("--no-femcore", action="store_true")
     args = ap.parse_args()
     levels = [int(v) for v in args.levels.split(",")]
+    if not args.no_femcore:
+        subprocess.run(["cargo", "build", "-q", "--release", "-p", "tactile"], check=True)
     for p_air in (float(v) for v in args.pressures.split(",")):
         print(f"p_air = {p_air:g} kPa, rigid plate, frictionless")
-        ref = {} if args.no_femcore else femcore(p_air)
-        res = {n: solve(p_air, n, max(1, args.wall * n // 40), args.multiplier) for n in levels}
+        production = band = None
+        if not args.no_femcore:
+            production, band = femcore(p_air), femcore(p_air, edge_band=True)
+        res, times = {}, {}
+        for n in levels:
+            start = time.perf_counter()
+            res[n] = solve(p_air, n, max(1, args.wall * n // 40), args.multiplier)
+            times[n] = time.perf_counter() - start
         print("  h mm | " + " | ".join(f"felupe {n}: a mm  P N  u_s mm" for n in levels)
-              + " | fem-core: a mm  P N  u_s mm")
+              + " | fem-core: a mm  P N  u_s mm | fem-core band: a mm  P N  u_s mm")
         for i, h in enumerate(DEPTHS):
             cols = [
                 f"{res[n][i][1]:.4f} {res[n][i][2]:.4f} {res[n][i][3]:.5f}" if i < len(res[n]) else "-"
                 for n in levels
             ]
-            fc = ref.get(round(h, 4))
-            fcs = f"{fc[0]:.4f} {fc[1]:.4f} {fc[2]:.5f}" if fc else "-"
-            print(f"  {h:.1f} | " + " | ".join(cols) + f" | {fcs}", flush=True)
-
+            for rows in (production, band):
+                fc = rows[0].get(round(h, 4)) if rows else None
+                cols.append(f"{fc[0]:.4f} {fc[1]:.4f} {fc[2]:.5f}" if fc else "-")
+            print(f"  {h:.1f} | " + " | ".join(cols), flush=True)
+        if production:
+            speed_table(p_air, levels, res, times, production, band)
 
 if __name__ == "__main__":
     main()
