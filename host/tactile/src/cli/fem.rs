@@ -63,8 +63,9 @@ pub struct CurveArgs {
     #[arg(long, allow_negative_numbers = true)]
     pub mesh_level: Option<i32>,
     /// Resolve the contact edge with a band of 25 um elements that follows it: a converged
-    /// to about 2 um (the production mesh's a is off by up to ~25 um), at 3-7 times the
-    /// time. Frictionless curves only.
+    /// along the surfaces to about 2 um (the production mesh's a is off by up to ~25 um);
+    /// with two elements through the shell's wall, about 5 um low on stiff samples. At 3-7
+    /// times the time. Frictionless curves only.
     #[arg(long)]
     pub edge_band: bool,
     /// Output CSV file.
