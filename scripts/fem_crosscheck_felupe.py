@@ -14,9 +14,10 @@ Every case is solved on a sequence of meshes (elements along the arc and through
 doubled each time), so felupe's own mesh convergence is printed next to fem-core's curves
 (`tactile fem curve --modulus 1e7 --pressure P --depth 1.7 --steps 34`, on the production
 mesh and with `--edge-band`). Then, side by side on one core, each solver's time per curve
-and its largest difference in a from the edge band's converged a.
+and its largest difference in a from the edge band's a (converged along the surfaces;
+its two elements through the wall leave it a few um low on stiff samples).
 
-Usage: scripts/fem_crosscheck_felupe.sh [--pressures 0,6,15] [--levels 40,80,160]
+Usage: scripts/fem_crosscheck_felupe.sh [--pressures 0,6,15] [--levels 40,80,160,320]
 Units: mm, kPa, mN (printed loads in N).
 """
 
@@ -173,8 +174,9 @@ def femcore(p_air, edge_band=False):
     """fem-core's curve at the same depths (34 steps to 1.7 mm, E2 = 1e7 kPa: rigid), on the
     production mesh or with the band of fine elements at the contact edge; rows by h and the
     solve's wall time (s, one core, the solver's own figure)."""
-    exe = "target/release/tactile"
-    out = "target/felupe-crosscheck-femcore.csv"
+    target = os.environ.get("CARGO_TARGET_DIR", "target")
+    exe = os.path.join(target, "release", "tactile")
+    out = os.path.join(target, "felupe-crosscheck-femcore.csv")
     cmd = [exe, "fem", "curve", "--modulus", "1e7", "--pressure", str(p_air), "--depth", "1.7",
            "--steps", "34", "--out", out] + (["--edge-band"] if edge_band else [])
     env = dict(os.environ, RAYON_NUM_THREADS="1")
@@ -247,6 +249,7 @@ def main():
             print(f"  {h:.1f} | " + " | ".join(cols), flush=True)
         if production:
             speed_table(p_air, levels, res, times, production, band)
+
 
 if __name__ == "__main__":
     main()

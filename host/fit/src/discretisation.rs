@@ -5,9 +5,9 @@
 //! `tactile lut build --edge-band`, the shipped `fem-core/data/default-fine.lut`), differ
 //! in the contact radius by the leading part of level L's discretisation error (all of it,
 //! to about 2 um along the surfaces, with the band; its two elements through the shell's
-//! wall leave about 5 um on stiff samples, not included). Projected on the fit's sensitivity to ln E2 at the
-//! estimate E, that difference is the bias it causes in the modulus,
-//! ln E(production model) - ln E(finer model), to first order:
+//! wall leave about 5 um on stiff samples, not included). Projected on the fit's
+//! sensitivity to ln E2 at the estimate E, that difference is the bias it causes in the
+//! modulus, ln E(production model) - ln E(finer model), to first order:
 //!
 //! `d = sum_i s_i (a_fine(E, p_i, u_i) - a(E, p_i, u_i)) / sum_i s_i^2`,
 //! `s_i = da/d ln E2 at (E, p_i, u_i)` (central difference, step 0.01 in ln E2).
