@@ -14,8 +14,8 @@ Every case is solved on a sequence of meshes (elements along the arc and through
 doubled each time), so felupe's own mesh convergence is printed next to fem-core's curves
 (`tactile fem curve --modulus 1e7 --pressure P --depth 1.7 --steps 34`, on the production
 mesh and with `--edge-band`). Then, side by side on one core, each solver's time per curve
-and its largest difference in a from the edge band's a (converged along the surfaces;
-its two elements through the wall leave it a few um low on stiff samples).
+and its largest difference in a from the edge band's a (converged along the surfaces
+and, with eight elements, through the wall).
 
 Usage: scripts/fem_crosscheck_felupe.sh [--pressures 0,6,15] [--levels 40,80,160,320]
 Units: mm, kPa, mN (printed loads in N).
@@ -196,7 +196,7 @@ def speed_table(p_air, levels, res, times, production, band):
     """Time per curve against the largest difference in a from the converged reference (the
     fem-core band) over the depths every solver reached."""
     (ref, t_band), (prod, t_prod) = band, production
-    print(f"  speed at {p_air:g} kPa (one core; a against fem-core's edge band, two elements through the wall):")
+    print(f"  speed at {p_air:g} kPa (one core; a against fem-core's edge band):")
     print("    solver              time s   largest |a - a_band| um, largest in % of a, depths compared")
 
     def err(rows):

@@ -29,6 +29,12 @@ pub struct EdgeBand {
     pub depth_size_mm: f64,
 }
 
+/// Elements through the shell's 0.4 mm wall under the band. The production mesh's two
+/// leave a 3-5 um low on 100-1000 kPa samples against sixteen; eight are within 0.7 um
+/// of sixteen at 1000 kPa / 15 kPa (the stiffest sample the tables hold), for 1.2-2 times
+/// the band's cost with two (docs/fem-verification.md, "Through the wall").
+pub const CONVERGED_WALL_ELEMENTS: usize = 8;
+
 impl EdgeBand {
     /// 25 um elements over +-0.3 mm, 50 um into the sample's depth (see the convergence
     /// study in docs/fem-verification.md: 12.5 um elements, along the surfaces and into

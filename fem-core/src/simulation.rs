@@ -288,7 +288,8 @@ impl Simulation {
 
     /// The contact radius resolved by a band of fine elements that follows the contact
     /// edge ([`EdgeBand::CONVERGED`]: a converged to about 2 um, at 4-8 times the
-    /// production cost; frictionless curves only, others keep the plain mesh), the
+    /// production cost; frictionless curves only, others keep the plain mesh) over
+    /// [`crate::edge_band::CONVERGED_WALL_ELEMENTS`] elements through the shell's wall, the
     /// contact tangent without the master surface's curvature for a pressurised shell (the
     /// term makes Newton wander on the band's fine surfaces; set the pressure first,
     /// [`LinearSolver::contact_curvature_tangent`]), and Newton settings that reach the
@@ -296,6 +297,9 @@ impl Simulation {
     /// stagnation limit and multiplier predictor).
     pub fn with_edge_band(mut self) -> Self {
         self.discretisation.edge_band = Some(EdgeBand::CONVERGED);
+        // the wall's bending carries the load to the contact edge: resolve it as well
+        let wall = &mut self.discretisation.mesh.shell.thickness;
+        *wall = (*wall).max(crate::edge_band::CONVERGED_WALL_ELEMENTS);
         // pressurised, the shell's pressure stiffness dominates the contact's geometric
         // stiffness and the exact term only makes Newton wander on the band's fine surfaces
         // (step attempts 188 -> 60 at 1000 kPa / 15 kPa, 197 -> 49 on the rigid plate);

@@ -29,8 +29,8 @@ use fem_core::{Curve, CurveParams};
 
 /// Mesh level of the truth's sample: the production mesh with the band of fine elements
 /// that follows the contact edge (`fem_core::Simulation::with_edge_band`), whose contact
-/// radius is converged along the surfaces to about a micrometre (through the wall, as the
-/// baseline, to about 5 um on stiff samples) — the settings of the converged baseline
+/// radius is converged to about 2 um (along the surfaces and through the shell's wall) —
+/// the settings of the converged baseline
 /// (`default-fine.lut`) but solved at the truth's exact modulus and pressure, so the
 /// diagnosis sees the table's interpolation, not a shared mesh.
 pub const TRUTH_MESH_LEVEL: i32 = 0;

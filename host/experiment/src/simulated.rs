@@ -360,8 +360,7 @@ pub fn rigid_calibration(
 
 /// Mesh level of the demo's simulated sample, solved with the band of fine elements that
 /// follows the contact edge (the converged contact radius, about 2 um from the mesh limit
-/// along the surfaces; the wall's two elements, which the fit's table shares, leave about
-/// 5 um on stiff samples):
+/// along the surfaces and under a micrometre through the shell's wall):
 /// the truth does not share the production table's discretisation error, nor its grid, so
 /// the demo's error is the instrument's end to end (model, table interpolation, the fit's
 /// discretisation correction, measurement). A solve takes 10-100 s of CPU (soft samples at

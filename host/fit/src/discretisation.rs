@@ -4,8 +4,8 @@
 //! or with the converged contact radius (the band of fine elements at the contact edge,
 //! `tactile lut build --edge-band`, the shipped `fem-core/data/default-fine.lut`), differ
 //! in the contact radius by the leading part of level L's discretisation error (all of it,
-//! to about 2 um along the surfaces, with the band; its two elements through the shell's
-//! wall leave about 5 um on stiff samples, not included). Projected on the fit's
+//! to about 2 um along the surfaces and under a micrometre through the shell's wall, with
+//! the band). Projected on the fit's
 //! sensitivity to ln E2 at the estimate E, that difference is the bias it causes in the
 //! modulus, ln E(production model) - ln E(finer model), to first order:
 //!

@@ -63,9 +63,10 @@ pub struct CurveArgs {
     #[arg(long, allow_negative_numbers = true)]
     pub mesh_level: Option<i32>,
     /// Resolve the contact edge with a band of 25 um elements that follows it: a converged
-    /// along the surfaces to about 2 um (the production mesh's a is off by up to ~25 um);
-    /// with two elements through the shell's wall, about 5 um low on stiff samples. At 3-7
-    /// times the time. Frictionless curves only.
+    /// along the surfaces to about 2 um (the production mesh's a is off by up to ~25 um),
+    /// with eight elements through the shell's wall (the production mesh has two, which
+    /// leave a about 5 um low on stiff samples). At 4-12 times the time. Frictionless
+    /// curves only.
     #[arg(long)]
     pub edge_band: bool,
     /// Output CSV file.

@@ -69,8 +69,8 @@ pub struct BuildArgs {
     #[arg(long, value_delimiter = ',')]
     pub stiffening: Option<Vec<f64>>,
     /// Solve every curve with the band of fine elements that follows the contact edge: the
-    /// converged contact radius (about 2 um along the surfaces; about 5 um low on stiff
-    /// samples for the wall's two elements), at 3-15 times the time per curve.
+    /// converged contact radius (about 2 um along the surfaces, eight elements through the
+    /// shell's wall), at 4-20 times the time per curve.
     /// Frictionless grids only.
     #[arg(long)]
     pub edge_band: bool,
