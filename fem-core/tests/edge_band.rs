@@ -126,6 +126,11 @@ fn the_bands_newton_settings_reach_the_strict_settings_equilibria() {
     let mut fast = Simulation::new(&p).with_edge_band();
     fast.discretisation.edge_band = Some(BAND);
     assert_eq!(fast.nonlinear_solver.relative_tolerance, 1e-6);
+    // the wall resolved too (two elements leave a about 5 um low on stiff samples)
+    assert_eq!(
+        fast.discretisation.mesh.shell.thickness,
+        fem_core::edge_band::CONVERGED_WALL_ELEMENTS
+    );
     assert!(fast.nonlinear_solver.predict_multipliers);
     let mut strict = fast.clone();
     strict.nonlinear_solver.relative_tolerance = 1e-9;
