@@ -1431,16 +1431,15 @@ pub(crate) fn solve_stages(
         if let (Some(b), Some(extent), [.., before, last]) = (&band, band_extent, &points[..]) {
             let predicted = last.a_mm + (last.a_mm - before.a_mm).max(0.0);
             if !b.holds(extent, predicted) {
-                let moved_to = b.extent(predicted);
-                let mut next = settings.with_band(b, moved_to);
-                next.mesh.edge_window = Some(ind.band_over(&state, moved_to, b));
                 // one solve without cutting, with twice Newton's usual iteration budget: a
                 // transferred state starts far from the new mesh's contact equilibrium and
                 // Newton may wander before it converges (215 kPa at 10 kPa: three moves at
                 // h = 1.7-1.8 mm ran out of 30 iterations and the curve stopped at 1.8 mm;
                 // with 60 they converge and the curve completes); if it fails with the
                 // configured contact tangent, once more with the other one
-                let attempt_move = |ind: &mut Indentation, tangent: bool| {
+                let attempt_move = |ind: &mut Indentation, moved_to: [f64; 2], tangent: bool| {
+                    let mut next = settings.with_band(b, moved_to);
+                    next.mesh.edge_window = Some(ind.band_over(&state, moved_to, b));
                     let mut moved = Indentation::build(params, &next, Some(top_z_mm));
                     tune(&mut moved.model.newton);
                     moved.model.newton.stall_iterations = usize::MAX;
@@ -1452,13 +1451,31 @@ pub(crate) fn solve_stages(
                         moved.solve_step(&mut moved_state, h_from, params.pressure_kpa, &next);
                     moved.model.newton.max_iterations = usual_iterations;
                     moved.model.newton.contact_curvature_tangent = base_tangent;
-                    (moved, moved_state, result)
+                    (moved, moved_state, next, result)
                 };
-                let (mut moved, mut moved_state, mut result) = attempt_move(&mut ind, base_tangent);
-                if result.is_err() {
+                // the band centred on the predicted edge; failing that, on the present
+                // edge (a shorter move: 250 kPa at 6 kPa with eight wall elements failed
+                // every move ahead of the edge from h = 1.2 mm and stopped at 1.425 mm)
+                let mut targets = vec![b.extent(predicted)];
+                let at_edge = b.extent(last.a_mm);
+                if at_edge != targets[0] && b.holds(at_edge, last.a_mm) {
+                    targets.push(at_edge);
+                }
+                let attempts: Vec<([f64; 2], bool)> = targets
+                    .iter()
+                    .flat_map(|&t| [(t, base_tangent), (t, !base_tangent)])
+                    .collect();
+                let (mut moved, mut moved_state, mut next, mut result) =
+                    attempt_move(&mut ind, attempts[0].0, attempts[0].1);
+                let mut moved_to = attempts[0].0;
+                for &(target, tangent) in &attempts[1..] {
+                    if result.is_ok() {
+                        break;
+                    }
                     ind.attempts = std::mem::take(&mut moved.attempts);
                     ind.snap_through_path = std::mem::take(&mut moved.snap_through_path);
-                    (moved, moved_state, result) = attempt_move(&mut ind, !base_tangent);
+                    (moved, moved_state, next, result) = attempt_move(&mut ind, target, tangent);
+                    moved_to = target;
                 }
                 match result {
                     Ok(()) => {

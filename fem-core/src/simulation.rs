@@ -287,7 +287,7 @@ impl Simulation {
     }
 
     /// The contact radius resolved by a band of fine elements that follows the contact
-    /// edge ([`EdgeBand::CONVERGED`]: a converged to about 2 um, at 4-8 times the
+    /// edge ([`EdgeBand::CONVERGED`]: a converged to about 2 um, at 4-20 times the
     /// production cost; frictionless curves only, others keep the plain mesh) over
     /// [`crate::edge_band::CONVERGED_WALL_ELEMENTS`] elements through the shell's wall, the
     /// contact tangent without the master surface's curvature for a pressurised shell (the

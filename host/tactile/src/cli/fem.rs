@@ -65,7 +65,7 @@ pub struct CurveArgs {
     /// Resolve the contact edge with a band of 25 um elements that follows it: a converged
     /// along the surfaces to about 2 um (the production mesh's a is off by up to ~25 um),
     /// with eight elements through the shell's wall (the production mesh has two, which
-    /// leave a about 5 um low on stiff samples). At 4-12 times the time. Frictionless
+    /// leave a about 5 um low on stiff samples). At 4-20 times the time. Frictionless
     /// curves only.
     #[arg(long)]
     pub edge_band: bool,
