@@ -1458,7 +1458,7 @@ pub(crate) fn solve_stages(
                 // every move ahead of the edge from h = 1.2 mm and stopped at 1.425 mm)
                 let mut targets = vec![b.extent(predicted)];
                 let at_edge = b.extent(last.a_mm);
-                if at_edge != targets[0] && b.holds(at_edge, last.a_mm) {
+                if at_edge != targets[0] {
                     targets.push(at_edge);
                 }
                 let attempts: Vec<([f64; 2], bool)> = targets
