@@ -767,11 +767,26 @@ impl Indentation {
                 }
             }
         }
-        // back under travel control, on the branch the path reached
+        // back under travel control, on the branch the path reached: from the path's last
+        // state translated with the tube; failing that, from the path's chord between its
+        // last two states interpolated to h_to (1000 kPa at 0 kPa with the edge band:
+        // the path passed h_to by 1.1 um and the translated state found no equilibrium)
         self.previous = None;
         self.previous_multipliers = None;
-        let mut landing = state;
-        self.solve_step(&mut landing, h_to, p_kpa, settings)?;
+        let saved = self.saved_multipliers();
+        let mut landing = state.clone();
+        if let Err(failure) = self.solve_step(&mut landing, h_to, p_kpa, settings) {
+            let (state_before, h_before) = before;
+            if !(h_before < h_to && h_before < h) {
+                return Err(failure);
+            }
+            self.restore_multipliers(saved);
+            self.previous = Some((h_before, state_before));
+            landing = state;
+            let chord = self.solve_step(&mut landing, h_to, p_kpa, settings);
+            self.previous = None;
+            chord?;
+        }
         self.snap_through_path.extend(path);
         self.new_branch = true;
         Ok(landing)
