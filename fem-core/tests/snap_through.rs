@@ -147,8 +147,9 @@ fn a_snap_through_whose_apex_turns_back_is_followed_by_arc_length() {
 /// The band of fine elements at the contact edge passes the same snap-through. Its path
 /// passes the step's end a little further (h 1.1511 against 1.1500 mm at 1000 kPa) and
 /// the state translated from there back to the step's end found no equilibrium under
-/// travel control (the curve stopped at h = 1.10 mm, and the converged table's 1000 and
-/// 1468 kPa curves at p_air = 0 ended there); the landing starts from the path's chord
+/// travel control (this curve stopped at h = 1.10 mm; the shipped converged table, built
+/// before the fix, still ends its 1000 and 1468 kPa curves at p_air = 0 at the snap); the
+/// landing starts from the path's chord
 /// interpolated to the step's end instead. Past the snap the band agrees with the
 /// production mesh in u_s (the mesh barely moves the apex: within 3 um here, 0.8 um
 /// measured) while its a is below the production mesh's by its discretisation error
