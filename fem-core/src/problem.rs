@@ -1238,6 +1238,12 @@ const ARC_MAX_CUTS: usize = 8;
 /// Consecutive step cuts after which stalled Newton iterations are no longer abandoned early.
 const STALL_CUTS: u32 = 2;
 
+/// Converged steps in a row, none of them cut, after which a step smaller than its
+/// increment doubles (the band's increments start with the step that last converged; after
+/// a snap-through that is a few um, and without growing back the rest of the travel took
+/// 1000 steps per increment).
+const GROW_AFTER_CLEAN_STEPS: u32 = 4;
+
 /// How a [`continuation`] went: the last step that converged and whether any was cut.
 #[derive(Debug, Clone, Copy)]
 struct Stepping {
@@ -1247,7 +1253,8 @@ struct Stepping {
 
 /// Drive `solve(target, state, cuts)` from `from` to `to` in steps starting at
 /// `first_step` (at most `increment`), halving on failure (at most `max_cuts` times in a
-/// row) and growing back after success up to `increment`; when the cuts are exhausted,
+/// row) and growing back after success up to `increment` (at once after a cut, otherwise
+/// after [`GROW_AFTER_CLEAN_STEPS`] converged steps in a row); when the cuts are exhausted,
 /// one direct attempt at `to` (jumping a snap-through).
 #[allow(clippy::too_many_arguments)] // a private driver; the call sites name every argument
 fn continuation(
@@ -1271,6 +1278,7 @@ fn continuation(
         cut: false,
     };
     let mut cuts = 0;
+    let mut clean_steps = 0;
     let start_state = state.clone();
     while done < to - 1e-12 * to.abs().max(1.0) {
         let target = (done + step).min(to);
@@ -1287,10 +1295,17 @@ fn continuation(
                 if cuts > 0 {
                     cuts -= 1;
                     step *= 2.0;
+                } else if step < increment {
+                    clean_steps += 1;
+                    if clean_steps >= GROW_AFTER_CLEAN_STEPS {
+                        step = (2.0 * step).min(increment);
+                        clean_steps = 0;
+                    }
                 }
             }
             Err(failure) => {
                 on_failure_restore();
+                clean_steps = 0;
                 stepping.cut = true;
                 cuts += 1;
                 if cuts > max_cuts && target < to {
@@ -1704,5 +1719,39 @@ mod tests {
         let (attempts, _, end) = stepped_path(0.03, 40, true);
         assert!((end - 2.0).abs() < 1e-12);
         assert!(attempts < 200, "{attempts} attempts");
+    }
+
+    #[test]
+    fn a_tiny_first_step_grows_back_to_the_increment() {
+        // after a snap-through the remembered step can be 1/1024 of the increment; with
+        // every step converging it doubles after each GROW_AFTER_CLEAN_STEPS steps: 4 steps
+        // each of s, 2s, ..., 256s cover 1020 s, a few more the rest, instead of 1024
+        // steps of s
+        let dh = 0.05;
+        let mut attempts = 0;
+        let mut state = vec![0.0];
+        let stepping = continuation(
+            0.0,
+            dh,
+            dh,
+            dh / 1024.0,
+            10,
+            &mut state,
+            |target, s, _| {
+                attempts += 1;
+                s[0] = target;
+                Ok(())
+            },
+            || {},
+            |_: &[f64], _: &[f64]| {},
+            |_, _, _: &[f64], _| None,
+            "test",
+            "mm",
+        )
+        .unwrap();
+        assert!((state[0] - dh).abs() < 1e-15);
+        assert!(attempts <= 40, "{attempts} attempts");
+        assert!(!stepping.cut);
+        assert!(stepping.last_step >= dh / 8.0, "{}", stepping.last_step);
     }
 }

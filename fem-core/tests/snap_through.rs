@@ -144,24 +144,25 @@ fn a_snap_through_whose_apex_turns_back_is_followed_by_arc_length() {
     assert!(at(1.8) - at(1.7) > 0.5, "the far branch is reached");
 }
 
-/// The band of fine elements at the contact edge passes the same snap-through. Its path
-/// passes the step's end a little further (h 1.1511 against 1.1500 mm at 1000 kPa) and
-/// the state translated from there back to the step's end found no equilibrium under
-/// travel control (this curve stopped at h = 1.10 mm; the shipped converged table, built
-/// before the fix, still ends its 1000 and 1468 kPa curves at p_air = 0 at the snap); the
-/// landing starts from the path's chord
-/// interpolated to the step's end instead. Past the snap the band agrees with the
-/// production mesh in u_s (the mesh barely moves the apex: within 3 um here, 0.8 um
-/// measured) while its a is below the production mesh's by its discretisation error
-/// (at most 28.5 um at mesh level 0, `fem_core::discretisation`).
+/// The band of fine elements at the contact edge passes the same snap-through and goes on
+/// to the table's full travel. Its path passes the step's end a little further (h 1.1511
+/// against 1.1500 mm at 1000 kPa) and the state translated from there back to the step's
+/// end found no equilibrium under travel control (this curve stopped at h = 1.10 mm); the
+/// landing starts from the path's chord interpolated to the step's end instead. After the
+/// snap the band's increments start with the step that last converged, a few um: without
+/// growing the step back this curve took over an hour to reach 2 mm (2 min now). Past the
+/// snap the band agrees with the production mesh in u_s within 5 um (3.3 um measured; the
+/// band's eight elements through the wall against two move the apex by that much) while
+/// its a is below the production mesh's by up to its discretisation error (at most 28.5 um
+/// at mesh level 0, `fem_core::discretisation`).
 #[test]
-#[ignore = "slow: the production band through the snap, about 2-4 min in release; cargo test --release -p fem-core --test snap_through -- --ignored"]
+#[ignore = "slow: the production band through the snap to 2 mm, about 2-4 min in release; cargo test --release -p fem-core --test snap_through -- --ignored"]
 fn the_edge_band_lands_past_the_snap_through() {
     let params = CurveParams {
         sample_modulus_kpa: 1000.0,
         pressure_kpa: 0.0,
-        max_depth_mm: 1.2,
-        steps: 24,
+        max_depth_mm: 2.0,
+        steps: 40,
         ..Default::default()
     };
     let band = Simulation::new(&params).with_edge_band().solve().unwrap();
@@ -172,10 +173,11 @@ fn the_edge_band_lands_past_the_snap_through() {
     assert!(jump.load_n[1] < jump.load_n[0], "{jump:?}");
     let production = Simulation::new(&params).solve().unwrap();
     assert_eq!(production.stop, StopReason::Completed);
-    let (b, p) = (
-        band.curve.points.last().unwrap(),
-        production.curve.points.last().unwrap(),
-    );
-    assert!((b.u_s_mm - p.u_s_mm).abs() < 3e-3, "u_s {b:?} vs {p:?}");
-    assert!((b.a_mm - p.a_mm).abs() < 0.0285, "a {b:?} vs {p:?}");
+    assert_eq!(band.curve.points.len(), production.curve.points.len());
+    for (b, p) in band.curve.points.iter().zip(&production.curve.points) {
+        if b.h_mm > jump.h_mm {
+            assert!((b.u_s_mm - p.u_s_mm).abs() < 5e-3, "u_s {b:?} vs {p:?}");
+            assert!((b.a_mm - p.a_mm).abs() < 0.0285, "a {b:?} vs {p:?}");
+        }
+    }
 }
