@@ -1651,6 +1651,33 @@ pub(crate) fn solve_stages(
 mod tests {
     use super::*;
 
+    /// `continuation` with at most 10 cuts, nothing to restore or commit and no path past a
+    /// limit point.
+    fn plain_continuation(
+        from: f64,
+        to: f64,
+        increment: f64,
+        first_step: f64,
+        state: &mut Vec<f64>,
+        solve: impl FnMut(f64, &mut Vec<f64>, u32) -> Result<(), NewtonFailure>,
+    ) -> Stepping {
+        continuation(
+            from,
+            to,
+            increment,
+            first_step,
+            10,
+            state,
+            solve,
+            || {},
+            |_: &[f64], _: &[f64]| {},
+            |_, _, _: &[f64], _| None,
+            "test",
+            "mm",
+        )
+        .unwrap()
+    }
+
     /// `continuation` on a path where only steps up to `largest` converge, starting each of
     /// `increments` increments of 0.05 as stage 2 does: (attempts, failed attempts, final
     /// state).
@@ -1660,12 +1687,11 @@ mod tests {
         let mut state = vec![0.0];
         let (mut first_step, mut clean) = (dh, 0);
         for k in 0..increments {
-            let stepping = continuation(
+            let stepping = plain_continuation(
                 dh * k as f64,
                 dh * (k + 1) as f64,
                 dh,
                 first_step,
-                10,
                 &mut state,
                 |target, s, _| {
                     attempts += 1;
@@ -1680,13 +1706,7 @@ mod tests {
                         })
                     }
                 },
-                || {},
-                |_: &[f64], _: &[f64]| {},
-                |_, _, _: &[f64], _| None,
-                "test",
-                "mm",
-            )
-            .unwrap();
+            );
             if remember {
                 (first_step, clean) = next_first_step(stepping, clean, dh);
             }
@@ -1730,25 +1750,11 @@ mod tests {
         let dh = 0.05;
         let mut attempts = 0;
         let mut state = vec![0.0];
-        let stepping = continuation(
-            0.0,
-            dh,
-            dh,
-            dh / 1024.0,
-            10,
-            &mut state,
-            |target, s, _| {
-                attempts += 1;
-                s[0] = target;
-                Ok(())
-            },
-            || {},
-            |_: &[f64], _: &[f64]| {},
-            |_, _, _: &[f64], _| None,
-            "test",
-            "mm",
-        )
-        .unwrap();
+        let stepping = plain_continuation(0.0, dh, dh, dh / 1024.0, &mut state, |target, s, _| {
+            attempts += 1;
+            s[0] = target;
+            Ok(())
+        });
         assert!((state[0] - dh).abs() < 1e-15);
         assert!(attempts <= 40, "{attempts} attempts");
         assert!(!stepping.cut);
