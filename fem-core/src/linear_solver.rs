@@ -412,7 +412,8 @@ impl SymmetricSolver {
             .as_mut()
             .ok_or_else(|| FemError::LinearSolver("no cached structure".into()))?;
         cache.last = None;
-        let matrix = SparseColMat::new(cache.symbolic.clone(), values);
+        // a view of the cached pattern (no copy of it per factorisation)
+        let matrix = SparseColMatRef::new(cache.symbolic.as_ref(), &values);
         let mut x = Mat::<f64>::from_fn(n, 1, |i, _| rhs[i]);
         let stack = MemStack::new(&mut cache.work);
         let factored = cache.llt.factorize_numeric_llt(
@@ -471,7 +472,6 @@ impl SymmetricSolver {
             self.lu_fallbacks += 1;
             let upper = matrix.symbolic();
             let (col_ptr, row_idx) = (upper.col_ptr(), upper.row_idx());
-            let (sym, argsort, lu) = full_structure(cache)?;
             let upper_values = matrix.val();
             let mut expanded = Vec::with_capacity(2 * upper_values.len());
             for c in 0..n {
@@ -482,6 +482,7 @@ impl SymmetricSolver {
                     }
                 }
             }
+            let (sym, argsort, lu) = full_structure(cache)?;
             let m = SparseColMat::new_from_argsort(sym.clone(), argsort, &expanded)
                 .map_err(|e| solver_error("full matrix", e))?;
             let numeric = factor_lu(lu, m.as_ref())?;
