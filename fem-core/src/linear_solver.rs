@@ -4,7 +4,10 @@
 //! Hessian of a potential, hence symmetric: only its upper triangle is assembled and factored
 //! with faer's supernodal sparse Cholesky (LL^T; forced, faer's heuristic would pick the
 //! ~1.4x slower simplicial variant here). The symbolic structure and the AMD ordering are
-//! cached and reused as long as the assembled entries fit the pattern; the pattern is the
+//! cached and reused as long as the assembled entries fit the pattern; the values are
+//! scattered straight into the lower triangle of the AMD-permuted matrix, the layout the
+//! supernodal factorisation works in (faer would otherwise permute the whole matrix at
+//! every factorisation); the pattern is the
 //! union of every pattern seen plus reserved entries (the couplings contact may create, see
 //! [`SymmetricSolver::reserve`]), so one analysis usually serves a whole curve. If the
 //! Cholesky factorisation fails (a tangent that is not positive definite: far from
@@ -56,7 +59,17 @@ impl UpperTriplets {
 }
 
 struct CachedStructure {
+    /// Upper pattern in the assembly's numbering (the LU fallbacks' and the pattern union's).
     symbolic: SymbolicSparseColMat<usize>,
+    /// Lower pattern of the AMD-permuted matrix P K P^T: the values' layout.
+    permuted: SymbolicSparseColMat<usize>,
+    /// The AMD permutation: `fwd[i]` is the assembly index of permuted index i, `inv` its
+    /// inverse.
+    fwd: Vec<usize>,
+    inv: Vec<usize>,
+    /// For each entry of `permuted`, the position of the same entry in `symbolic`.
+    upper_slot: Vec<usize>,
+    /// Symbolic Cholesky of the permuted matrix (identity ordering).
     llt: SymbolicCholesky<usize>,
     /// Numeric factor values (reused between factorisations).
     factor: Vec<f64>,
@@ -74,6 +87,27 @@ struct CachedStructure {
     last: Option<NumericFactor>,
     /// Triplet slots of the last scatter into `symbolic`.
     slots: SlotMap,
+}
+
+impl CachedStructure {
+    /// `rhs` (assembly numbering) as a column in the permuted numbering.
+    fn permuted_rhs(&self, rhs: &[f64]) -> Mat<f64> {
+        Mat::<f64>::from_fn(rhs.len(), 1, |i, _| rhs[self.fwd[i]])
+    }
+
+    /// A permuted solution column back in the assembly numbering.
+    fn unpermuted(&self, x: &Mat<f64>) -> Vec<f64> {
+        self.inv.iter().map(|&p| x[(p, 0)]).collect()
+    }
+
+    /// Values in the permuted lower layout moved to the upper pattern `symbolic`.
+    fn upper_values(&self, permuted: &[f64]) -> Vec<f64> {
+        let mut upper = vec![0.0; self.symbolic.row_idx().len()];
+        for (&slot, &v) in self.upper_slot.iter().zip(permuted) {
+            upper[slot] = v;
+        }
+        upper
+    }
 }
 
 /// The numeric factorisation kept from the last solve.
@@ -116,12 +150,6 @@ fn solver_error(what: &str, e: impl std::fmt::Debug) -> FemError {
     FemError::LinearSolver(format!("{what}: {e:?}"))
 }
 
-/// Scatter the triplets into the values of `symbolic` (upper CSC); `None` if an entry is
-/// not in the pattern.
-fn fill_values(symbolic: &SymbolicSparseColMat<usize>, t: &UpperTriplets) -> Option<Vec<f64>> {
-    fill_values_cached(symbolic, t, &mut SlotMap::default())
-}
-
 /// Position in the CSC values of each triplet of the last scatter, with the triplets'
 /// indices: assembly emits the same element and pressure triplets in the same order every
 /// time (only the contact part at the end varies), so the common prefix of the index
@@ -133,15 +161,18 @@ struct SlotMap {
     slots: Vec<usize>,
 }
 
-/// [`fill_values`] reusing (and updating) the slots of the previous scatter into the same
-/// pattern. The values are summed in triplet order either way (the same numbers).
+/// Scatter the triplets into the values of `permuted` (the lower CSC pattern of P K P^T,
+/// `inv` the permutation's inverse), reusing (and updating) the slots of the previous
+/// scatter into the same pattern; `None` if an entry is not in the pattern. The values are
+/// summed in triplet order either way (the same numbers).
 fn fill_values_cached(
-    symbolic: &SymbolicSparseColMat<usize>,
+    permuted: &SymbolicSparseColMat<usize>,
+    inv: &[usize],
     t: &UpperTriplets,
     map: &mut SlotMap,
 ) -> Option<Vec<f64>> {
-    let col_ptr = symbolic.col_ptr();
-    let row_idx = symbolic.row_idx();
+    let col_ptr = permuted.col_ptr();
+    let row_idx = permuted.row_idx();
     let prefix = map
         .rows
         .iter()
@@ -153,7 +184,8 @@ fn fill_values_cached(
     map.cols.truncate(prefix);
     map.slots.truncate(prefix);
     for (&r, &c) in t.rows[prefix..].iter().zip(&t.cols[prefix..]) {
-        let (ru, cu) = (r as usize, c as usize);
+        let (pr, pc) = (inv[r as usize], inv[c as usize]);
+        let (ru, cu) = (pr.max(pc), pr.min(pc));
         let range = col_ptr[cu]..col_ptr[cu + 1];
         let Ok(k) = row_idx[range.clone()].binary_search(&ru) else {
             *map = SlotMap::default();
@@ -271,18 +303,18 @@ impl SymmetricSolver {
         t: &UpperTriplets,
         rhs: &[f64],
     ) -> Result<Vec<f64>, FemError> {
-        let values = self.upper_values(n, t)?;
+        let values = self.permuted_values(n, t)?;
         self.factor_and_solve(n, values, rhs)
     }
 
-    /// Values of the symmetric matrix `t` in the cached upper pattern, extending the pattern
-    /// (and repeating the symbolic analysis) if an entry does not fit.
-    fn upper_values(&mut self, n: usize, t: &UpperTriplets) -> Result<Vec<f64>, FemError> {
+    /// Values of the symmetric matrix `t` in the cached permuted lower pattern, extending the
+    /// pattern (and repeating the symbolic analysis) if an entry does not fit.
+    fn permuted_values(&mut self, n: usize, t: &UpperTriplets) -> Result<Vec<f64>, FemError> {
         let mut values = self
             .cache
             .as_mut()
             .filter(|c| c.symbolic.nrows() == n)
-            .and_then(|c| fill_values_cached(&c.symbolic, t, &mut c.slots));
+            .and_then(|c| fill_values_cached(&c.permuted, &c.inv, t, &mut c.slots));
         if values.is_none() {
             let mut pairs: Vec<Pair<usize, usize>> = t
                 .rows
@@ -305,18 +337,65 @@ impl SymmetricSolver {
             // AMD ordering; the supernodal factorisation (dense blocks) is forced: faer's
             // automatic choice picks the simplicial one for these 2-D meshes, measured ~2x
             // slower in the numeric factorisation here
-            let llt = factorize_symbolic_cholesky(
+            let params = CholeskySymbolicParams {
+                supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
+                ..Default::default()
+            };
+            let amd = factorize_symbolic_cholesky(
                 symbolic.as_ref(),
                 Side::Upper,
                 SymmetricOrdering::Amd,
-                CholeskySymbolicParams {
-                    supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
-                    ..Default::default()
-                },
+                params,
             )
             .map_err(|e| solver_error("symbolic Cholesky", e))?;
+            let (fwd, inv) = match amd.perm() {
+                Some(perm) => {
+                    let (fwd, inv) = perm.arrays();
+                    (fwd.to_vec(), inv.to_vec())
+                }
+                None => ((0..n).collect(), (0..n).collect()),
+            };
+            // the permuted matrix's lower pattern (the values' layout) and its upper one (what
+            // the symbolic analysis reads); the same structure as faer's own permutation
+            let (col_ptr, row_idx) = (symbolic.col_ptr(), symbolic.row_idx());
+            let mut lower_pairs = Vec::with_capacity(row_idx.len());
+            let mut upper_pairs = Vec::with_capacity(row_idx.len());
+            for c in 0..n {
+                for &r in &row_idx[col_ptr[c]..col_ptr[c + 1]] {
+                    let (pr, pc) = (inv[r], inv[c]);
+                    let (hi, lo) = (pr.max(pc), pr.min(pc));
+                    lower_pairs.push(Pair::new(hi, lo));
+                    upper_pairs.push(Pair::new(lo, hi));
+                }
+            }
+            let (permuted, _) = SymbolicSparseColMat::try_new_from_indices(n, n, &lower_pairs)
+                .map_err(|e| solver_error("permuted pattern", e))?;
+            let (permuted_upper, _) =
+                SymbolicSparseColMat::try_new_from_indices(n, n, &upper_pairs)
+                    .map_err(|e| solver_error("permuted pattern", e))?;
+            let llt = factorize_symbolic_cholesky(
+                permuted_upper.as_ref(),
+                Side::Upper,
+                SymmetricOrdering::Identity,
+                params,
+            )
+            .map_err(|e| solver_error("symbolic Cholesky", e))?;
+            let (p_ptr, p_idx) = (permuted.col_ptr(), permuted.row_idx());
+            let mut upper_slot = vec![0; p_idx.len()];
+            for pc in 0..n {
+                for k in p_ptr[pc]..p_ptr[pc + 1] {
+                    let (r, c) = (fwd[p_idx[k]], fwd[pc]);
+                    let (r, c) = (r.min(c), r.max(c));
+                    let range = col_ptr[c]..col_ptr[c + 1];
+                    let at = row_idx[range.clone()]
+                        .binary_search(&r)
+                        .map_err(|_| FemError::LinearSolver("permuted pattern mismatch".into()))?;
+                    upper_slot[k] = range.start + at;
+                }
+            }
             self.symbolic_analyses += 1;
-            values = fill_values(&symbolic, t);
+            let mut slots = SlotMap::default();
+            values = fill_values_cached(&permuted, &inv, t, &mut slots);
             let req = StackReq::any_of(&[
                 llt.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()),
                 llt.factorize_numeric_ldlt_scratch::<f64>(Par::Seq, Default::default()),
@@ -326,12 +405,16 @@ impl SymmetricSolver {
             let factor = vec![0.0; llt.len_val()];
             self.cache = Some(CachedStructure {
                 symbolic,
+                permuted,
+                fwd,
+                inv,
+                upper_slot,
                 llt,
                 factor,
                 work,
                 full: None,
                 last: None,
-                slots: SlotMap::default(),
+                slots,
             });
         }
         values.ok_or_else(|| FemError::LinearSolver("pattern mismatch".into()))
@@ -349,12 +432,13 @@ impl SymmetricSolver {
         skew: &[(u32, u32, f64)],
         rhs: &[f64],
     ) -> Result<Vec<f64>, FemError> {
-        let values = self.upper_values(n, t)?;
+        let permuted = self.permuted_values(n, t)?;
         let cache = self
             .cache
             .as_mut()
             .ok_or_else(|| FemError::LinearSolver("no cached structure".into()))?;
         cache.last = None;
+        let values = cache.upper_values(&permuted);
         full_structure(cache)?;
         let (sym, _, symbolic_lu) = cache
             .full
@@ -399,8 +483,8 @@ impl SymmetricSolver {
         Ok(out)
     }
 
-    /// Factor the symmetric matrix with the cached structure and `values` (Cholesky, then
-    /// LDL^T, then LU, see the module docs) and solve.
+    /// Factor the symmetric matrix with the cached structure and `values` (in the permuted
+    /// lower layout; Cholesky, then LDL^T, then LU, see the module docs) and solve.
     fn factor_and_solve(
         &mut self,
         n: usize,
@@ -412,14 +496,15 @@ impl SymmetricSolver {
             .as_mut()
             .ok_or_else(|| FemError::LinearSolver("no cached structure".into()))?;
         cache.last = None;
-        // a view of the cached pattern (no copy of it per factorisation)
-        let matrix = SparseColMatRef::new(cache.symbolic.as_ref(), &values);
-        let mut x = Mat::<f64>::from_fn(n, 1, |i, _| rhs[i]);
+        // a view of the cached pattern (no copy of it per factorisation), already in the
+        // factorisation's ordering and triangle
+        let matrix = SparseColMatRef::new(cache.permuted.as_ref(), &values);
+        let mut x = cache.permuted_rhs(rhs);
         let stack = MemStack::new(&mut cache.work);
         let factored = cache.llt.factorize_numeric_llt(
             &mut cache.factor,
-            matrix.as_ref(),
-            Side::Upper,
+            matrix,
+            Side::Lower,
             Default::default(),
             Par::Seq,
             stack,
@@ -443,8 +528,8 @@ impl SymmetricSolver {
             let stack = MemStack::new(&mut cache.work);
             let ldlt = cache.llt.factorize_numeric_ldlt(
                 &mut cache.factor,
-                matrix.as_ref(),
-                Side::Upper,
+                matrix,
+                Side::Lower,
                 Default::default(),
                 Par::Seq,
                 stack,
@@ -461,18 +546,18 @@ impl SymmetricSolver {
                 solved = (0..n).all(|i| x[(i, 0)].is_finite());
                 if solved {
                     cache.last = Some(NumericFactor::Ldlt);
-                } else {
-                    x = Mat::<f64>::from_fn(n, 1, |i, _| rhs[i]);
                 }
             }
         }
-        if !solved {
-            // not positive definite: LU of the full symmetric matrix, with the expanded
-            // pattern and its symbolic LU cached alongside the Cholesky structure
+        let out = if solved {
+            cache.unpermuted(&x)
+        } else {
+            // not positive definite: LU of the full symmetric matrix in the assembly's
+            // numbering, with the expanded pattern and its symbolic LU cached alongside the
+            // Cholesky structure
             self.lu_fallbacks += 1;
-            let upper = matrix.symbolic();
-            let (col_ptr, row_idx) = (upper.col_ptr(), upper.row_idx());
-            let upper_values = matrix.val();
+            let upper_values = cache.upper_values(&values);
+            let (col_ptr, row_idx) = (cache.symbolic.col_ptr(), cache.symbolic.row_idx());
             let mut expanded = Vec::with_capacity(2 * upper_values.len());
             for c in 0..n {
                 for k in col_ptr[c]..col_ptr[c + 1] {
@@ -486,10 +571,11 @@ impl SymmetricSolver {
             let m = SparseColMat::new_from_argsort(sym.clone(), argsort, &expanded)
                 .map_err(|e| solver_error("full matrix", e))?;
             let numeric = factor_lu(lu, m.as_ref())?;
+            let mut x = Mat::<f64>::from_fn(n, 1, |i, _| rhs[i]);
             solve_lu(lu, &numeric, x.as_mut())?;
             cache.last = Some(NumericFactor::Lu(Box::new(numeric)));
-        }
-        let out: Vec<f64> = (0..n).map(|i| x[(i, 0)]).collect();
+            (0..n).map(|i| x[(i, 0)]).collect()
+        };
         if out.iter().any(|v| !v.is_finite()) {
             cache.last = None;
             return Err(FemError::LinearSolver(
@@ -517,9 +603,9 @@ impl SymmetricSolver {
         if rhs.len() != n {
             return None;
         }
-        let mut x = Mat::<f64>::from_fn(n, 1, |i, _| rhs[i]);
-        match cache.last.as_ref()? {
+        let out = match cache.last.as_ref()? {
             NumericFactor::Llt => {
+                let mut x = cache.permuted_rhs(rhs);
                 let stack = MemStack::new(&mut cache.work);
                 LltRef::new(&cache.llt, &cache.factor).solve_in_place_with_conj(
                     Conj::No,
@@ -527,8 +613,10 @@ impl SymmetricSolver {
                     Par::Seq,
                     stack,
                 );
+                cache.unpermuted(&x)
             }
             NumericFactor::Ldlt => {
+                let mut x = cache.permuted_rhs(rhs);
                 let stack = MemStack::new(&mut cache.work);
                 LdltRef::new(&cache.llt, &cache.factor).solve_in_place_with_conj(
                     Conj::No,
@@ -536,13 +624,15 @@ impl SymmetricSolver {
                     Par::Seq,
                     stack,
                 );
+                cache.unpermuted(&x)
             }
             NumericFactor::Lu(numeric) => {
+                let mut x = Mat::<f64>::from_fn(n, 1, |i, _| rhs[i]);
                 let (_, _, symbolic) = cache.full.as_ref()?;
                 solve_lu(symbolic, numeric, x.as_mut()).ok()?;
+                (0..n).map(|i| x[(i, 0)]).collect::<Vec<f64>>()
             }
-        }
-        let out: Vec<f64> = (0..n).map(|i| x[(i, 0)]).collect();
+        };
         out.iter().all(|v| v.is_finite()).then_some(out)
     }
 }
@@ -583,6 +673,73 @@ mod tests {
         }
         for (a, b) in kx.iter().zip(&rhs) {
             assert!((a - b).abs() < 1e-10);
+        }
+    }
+
+    /// K x for the symmetric matrix given by its upper triplets.
+    fn product(t: &UpperTriplets, x: &[f64]) -> Vec<f64> {
+        let mut kx = vec![0.0; x.len()];
+        for ((&r, &c), &v) in t.rows.iter().zip(&t.cols).zip(&t.values) {
+            let (r, c) = (r as usize, c as usize);
+            kx[r] += v * x[c];
+            if r != c {
+                kx[c] += v * x[r];
+            }
+        }
+        kx
+    }
+
+    /// The 5-point Laplacian of a 7 x 7 grid numbered in a scrambled order (so that the
+    /// fill-reducing ordering is far from the identity), shifted by `shift` on the diagonal,
+    /// with one dof anchored.
+    fn scrambled_grid(shift: f64) -> UpperTriplets {
+        let m = 7;
+        let index = |i: usize, j: usize| (17 * (i * m + j) + 5) % (m * m);
+        let mut t = UpperTriplets::default();
+        for i in 0..m {
+            for j in 0..m {
+                let a = index(i, j);
+                t.add(a, a, 4.0 - shift);
+                if i + 1 < m {
+                    t.add(a, index(i + 1, j), -1.0);
+                }
+                if j + 1 < m {
+                    t.add(a, index(i, j + 1), -1.0);
+                }
+            }
+        }
+        t.add(0, 0, 1.0);
+        t
+    }
+
+    #[test]
+    fn permuted_factorisations_solve_in_the_assembly_numbering() {
+        let n = 49;
+        let rhs: Vec<f64> = (0..n).map(|i| ((i * 7) % 11) as f64 - 5.0).collect();
+        // positive definite: Cholesky; indefinite: LDL^T, or LU when asked to
+        for (shift, with_lu) in [(0.0, false), (2.5, false), (2.5, true)] {
+            let t = scrambled_grid(shift);
+            let mut solver = SymmetricSolver {
+                indefinite_with_lu: with_lu,
+                ..Default::default()
+            };
+            let x = solver.solve(n, &t, &rhs).unwrap();
+            let kx = product(&t, &x);
+            for (a, b) in kx.iter().zip(&rhs) {
+                // O(1) entries and a well-conditioned grid: round-off only
+                assert!(
+                    (a - b).abs() < 1e-9,
+                    "shift {shift}, LU {with_lu}: {a} vs {b}"
+                );
+            }
+            assert_eq!(solver.resolve(&rhs).unwrap(), x);
+            let fallbacks = (solver.ldlt_fallbacks, solver.lu_fallbacks);
+            let expected = match (shift > 0.0, with_lu) {
+                (false, _) => (0, 0),
+                (true, false) => (1, 0),
+                (true, true) => (0, 1),
+            };
+            assert_eq!(fallbacks, expected, "shift {shift}, LU {with_lu}");
         }
     }
 }
