@@ -337,17 +337,15 @@ impl SymmetricSolver {
             // AMD ordering; the supernodal factorisation (dense blocks) is forced: faer's
             // automatic choice picks the simplicial one for these 2-D meshes, measured ~2x
             // slower in the numeric factorisation here
-            let params = CholeskySymbolicParams {
-                supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
-                ..Default::default()
+            let analyse = |upper: &SymbolicSparseColMat<usize>, ordering| {
+                let params = CholeskySymbolicParams {
+                    supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
+                    ..Default::default()
+                };
+                factorize_symbolic_cholesky(upper.as_ref(), Side::Upper, ordering, params)
+                    .map_err(|e| solver_error("symbolic Cholesky", e))
             };
-            let amd = factorize_symbolic_cholesky(
-                symbolic.as_ref(),
-                Side::Upper,
-                SymmetricOrdering::Amd,
-                params,
-            )
-            .map_err(|e| solver_error("symbolic Cholesky", e))?;
+            let amd = analyse(&symbolic, SymmetricOrdering::Amd)?;
             let (fwd, inv) = match amd.perm() {
                 Some(perm) => {
                     let (fwd, inv) = perm.arrays();
@@ -373,13 +371,7 @@ impl SymmetricSolver {
             let (permuted_upper, _) =
                 SymbolicSparseColMat::try_new_from_indices(n, n, &upper_pairs)
                     .map_err(|e| solver_error("permuted pattern", e))?;
-            let llt = factorize_symbolic_cholesky(
-                permuted_upper.as_ref(),
-                Side::Upper,
-                SymmetricOrdering::Identity,
-                params,
-            )
-            .map_err(|e| solver_error("symbolic Cholesky", e))?;
+            let llt = analyse(&permuted_upper, SymmetricOrdering::Identity)?;
             let (p_ptr, p_idx) = (permuted.col_ptr(), permuted.row_idx());
             let mut upper_slot = vec![0; p_idx.len()];
             for pc in 0..n {
