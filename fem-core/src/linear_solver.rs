@@ -4,11 +4,11 @@
 //! Hessian of a potential, hence symmetric: only its upper triangle is assembled and factored
 //! with faer's supernodal sparse Cholesky (LL^T; forced, faer's heuristic would pick the
 //! ~1.4x slower simplicial variant here). The symbolic structure and the AMD ordering are
-//! cached and reused as long as the assembled entries fit the pattern; the values are
+//! cached and reused as long as the assembled entries fit the pattern. The values are
 //! scattered straight into the lower triangle of the AMD-permuted matrix, the layout the
 //! supernodal factorisation works in (faer would otherwise permute the whole matrix at
-//! every factorisation); the pattern is the
-//! union of every pattern seen plus reserved entries (the couplings contact may create, see
+//! every factorisation). The pattern is the union of every pattern seen plus reserved
+//! entries (the couplings contact may create, see
 //! [`SymmetricSolver::reserve`]), so one analysis usually serves a whole curve. If the
 //! Cholesky factorisation fails (a tangent that is not positive definite: far from
 //! equilibrium, or near a limit point), LDL^T without pivoting is tried on the same
@@ -655,15 +655,7 @@ mod tests {
         assert_eq!(solver.resolve(&rhs).unwrap(), x);
         assert!(solver.resolve(&rhs[..n - 1]).is_none());
         // residual of the assembled symmetric system
-        let mut kx = vec![0.0; n];
-        for ((&r, &c), &v) in t.rows.iter().zip(&t.cols).zip(&t.values) {
-            let (r, c) = (r as usize, c as usize);
-            kx[r] += v * x[c];
-            if r != c {
-                kx[c] += v * x[r];
-            }
-        }
-        for (a, b) in kx.iter().zip(&rhs) {
+        for (a, b) in product(&t, &x).iter().zip(&rhs) {
             assert!((a - b).abs() < 1e-10);
         }
     }
@@ -716,6 +708,9 @@ mod tests {
                 ..Default::default()
             };
             let x = solver.solve(n, &t, &rhs).unwrap();
+            // the factorisation really ran in another numbering than the assembly's
+            let fwd = &solver.cache.as_ref().unwrap().fwd;
+            assert!(fwd.iter().enumerate().any(|(i, &f)| i != f));
             let kx = product(&t, &x);
             for (a, b) in kx.iter().zip(&rhs) {
                 // O(1) entries and a well-conditioned grid: round-off only
