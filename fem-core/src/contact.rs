@@ -592,9 +592,10 @@ impl ContactPair {
     /// Record every slave's closest-point surface coordinate at a converged state (the
     /// reference of the next step's slip increments).
     pub fn commit_slip_state(&mut self, position: &dyn Fn(usize) -> [f64; 2]) {
+        let control = self.control_points(position);
         let coords: Vec<Option<f64>> = (0..self.points.len())
             .map(|s| {
-                let (e, g) = self.project(self.point_position(s, position), position)?;
+                let (e, g) = self.project_on(self.point_position(s, position), &control)?;
                 let stiff = self.penalty_kpa_per_mm * self.slave_areas_mm2[s];
                 let (f, _) = smooth_ramp(
                     self.multipliers[s] - stiff * g.gap_mm,
@@ -607,11 +608,26 @@ impl ContactPair {
     }
 
     /// Closest master segment for a slave at `xs`: (segment index, gap).
+    #[cfg(test)]
     fn project(&self, xs: [f64; 2], position: &dyn Fn(usize) -> [f64; 2]) -> Option<(usize, Gap)> {
+        self.project_on(xs, &self.control_points(position))
+    }
+
+    /// Every segment's control points in the configuration `position` (computed once for
+    /// all slaves' projections).
+    fn control_points(&self, position: &dyn Fn(usize) -> [f64; 2]) -> Vec<[[f64; 2]; 4]> {
+        self.segments
+            .iter()
+            .map(|seg| seg.control_points(position))
+            .collect()
+    }
+
+    /// Closest master segment for a slave at `xs` among the segments with control points
+    /// `control` ([`Self::control_points`]): (segment index, gap).
+    fn project_on(&self, xs: [f64; 2], control: &[[[f64; 2]; 4]]) -> Option<(usize, Gap)> {
         let mut best: Option<(usize, Gap)> = None;
         let mut best_inside = false;
-        for (e, seg) in self.segments.iter().enumerate() {
-            let p = seg.control_points(position);
+        for (e, &p) in control.iter().enumerate() {
             // cheap reject by the bounding box of the segment's end points
             let (a, b) = (p[1], p[2]);
             let margin = (a[0] - b[0]).abs().max((a[1] - b[1]).abs());
@@ -678,9 +694,10 @@ impl ContactPair {
         with_tangent: bool,
     ) -> Vec<ContactTerm> {
         let mut terms = Vec::new();
+        let control = self.control_points(position);
         for s in 0..self.points.len() {
             let xs = self.point_position(s, position);
-            let Some((e, _)) = self.project(xs, position) else {
+            let Some((e, _)) = self.project_on(xs, &control) else {
                 continue;
             };
             let seg = &self.segments[e];
@@ -788,9 +805,10 @@ impl ContactPair {
 
     /// Signed gap of every slave point (None where it projects on no segment).
     pub fn slave_gaps(&self, position: &dyn Fn(usize) -> [f64; 2]) -> Vec<Option<f64>> {
+        let control = self.control_points(position);
         (0..self.points.len())
             .map(|s| {
-                self.project(self.point_position(s, position), position)
+                self.project_on(self.point_position(s, position), &control)
                     .map(|(_, g)| g.gap_mm)
             })
             .collect()

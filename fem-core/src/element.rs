@@ -128,6 +128,8 @@ impl PointGeometry {
 #[derive(Debug, Clone)]
 pub struct ElementGeometry {
     points: [PointGeometry; 9],
+    /// `M^{-1}`, `M = int N_p N_p^T dV` (the pressure mass matrix; `None` if singular).
+    pressure_mass_inverse: Option<SMatrix<f64, 3, 3>>,
 }
 
 impl ElementGeometry {
@@ -149,7 +151,15 @@ impl ElementGeometry {
         for (o, p) in out.iter_mut().zip(points) {
             *o = p?;
         }
-        Some(Self { points: out })
+        let mut mass = SMatrix::<f64, 3, 3>::zeros();
+        for pt in &out {
+            let np = SVector::<f64, 3>::from(pt.np);
+            mass += np * np.transpose() * pt.weight;
+        }
+        Some(Self {
+            points: out,
+            pressure_mass_inverse: mass.try_inverse(),
+        })
     }
 }
 
@@ -215,26 +225,48 @@ pub fn evaluate_geometry(
     formulation: Formulation,
     with_tangent: bool,
 ) -> Option<ElementResult> {
+    let mut out = ElementResult {
+        residual: ElementVector::zeros(),
+        tangent: ElementMatrix::zeros(),
+        min_jacobian: f64::INFINITY,
+        mean_pressure_kpa: 0.0,
+    };
+    evaluate_geometry_into(geometry, u, mat, formulation, with_tangent, &mut out)?;
+    Some(out)
+}
+
+/// [`evaluate_geometry`] into `out` (an assembly reuses one result for every element
+/// instead of moving a fresh 18 x 18 tangent out of each call). Without `with_tangent`
+/// `out.tangent` is left as it was.
+pub fn evaluate_geometry_into(
+    geometry: &ElementGeometry,
+    u: &ElementVector,
+    mat: &Material,
+    formulation: Formulation,
+    with_tangent: bool,
+    out: &mut ElementResult,
+) -> Option<()> {
     let points = &geometry.points;
     let grads: [[f64; 5]; 9] = std::array::from_fn(|q| points[q].gradient(u));
 
     let mut residual = ElementVector::zeros();
-    let mut tangent = ElementMatrix::zeros();
+    let tangent = &mut out.tangent;
+    if with_tangent {
+        tangent.fill(0.0);
+    }
     let mut min_jacobian = f64::INFINITY;
     let mut volume = 0.0;
     let mut pressure_integral = 0.0;
 
     match formulation {
         Formulation::Mixed => {
-            // pass 1: theta moments and the pressure mass matrix
-            let mut mass = SMatrix::<f64, 3, 3>::zeros();
+            // pass 1: theta moments (the pressure mass matrix is the reference geometry's)
             let mut theta_moment = SVector::<f64, 3>::zeros();
             for (pt, h) in points.iter().zip(&grads) {
                 let np = SVector::<f64, 3>::from(pt.np);
-                mass += np * np.transpose() * pt.weight;
                 theta_moment += np * (theta(mat, h) * pt.weight);
             }
-            let mass_inv = mass.try_inverse()?;
+            let mass_inv = geometry.pressure_mass_inverse?;
             let p_coef = mass_inv * theta_moment * mat.kappa_kpa;
             // pass 2: stresses with the condensed pressure
             let mut k_up = SMatrix::<f64, ELEMENT_DOFS, 3>::zeros();
@@ -245,14 +277,14 @@ pub fn evaluate_geometry(
                 min_jacobian = min_jacobian.min(r.jacobian);
                 residual += pt.transpose_times(&r.stress) * pt.weight;
                 if with_tangent {
-                    add_gt_a_g(&mut tangent, pt, &r.tangent);
+                    add_gt_a_g(tangent, pt, &r.tangent);
                     k_up += pt.transpose_times(&r.dtheta) * np.transpose() * pt.weight;
                 }
                 volume += pt.weight;
                 pressure_integral += p * pt.weight;
             }
             if with_tangent {
-                tangent += k_up * mass_inv * k_up.transpose() * mat.kappa_kpa;
+                *tangent += k_up * mass_inv * k_up.transpose() * mat.kappa_kpa;
             }
         }
         Formulation::Displacement => {
@@ -267,19 +299,17 @@ pub fn evaluate_geometry(
                         + dth * dth.transpose() * mat.kappa_kpa;
                     let a_rows: [[f64; 5]; 5] =
                         std::array::from_fn(|i| std::array::from_fn(|j| a[(i, j)]));
-                    add_gt_a_g(&mut tangent, pt, &a_rows);
+                    add_gt_a_g(tangent, pt, &a_rows);
                 }
                 volume += pt.weight;
                 pressure_integral += p * pt.weight;
             }
         }
     }
-    Some(ElementResult {
-        residual,
-        tangent,
-        min_jacobian,
-        mean_pressure_kpa: pressure_integral / volume,
-    })
+    out.residual = residual;
+    out.min_jacobian = min_jacobian;
+    out.mean_pressure_kpa = pressure_integral / volume;
+    Some(())
 }
 
 #[cfg(test)]

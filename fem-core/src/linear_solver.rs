@@ -31,21 +31,63 @@ use faer::sparse::linalg::lu::{LuRef, NumericLu, SymbolicLu, factorize_symbolic_
 use faer::sparse::{Argsort, Pair, SparseColMat, SparseColMatRef, SymbolicSparseColMat};
 use faer::{Conj, Mat, MatMut, Par, Side};
 
+use std::sync::Arc;
+
 use crate::FemError;
 
-/// Upper-triangle triplets of a symmetric matrix in a fixed assembly order.
+/// Index pairs (upper triangle) that every assembly of one model emits first and in the
+/// same order: its elements' entries. Assembled once per model, shared by reference.
+#[derive(Debug, Default, PartialEq)]
+pub struct SharedEntries {
+    pub rows: Vec<u32>,
+    pub cols: Vec<u32>,
+}
+
+/// Upper-triangle triplets of a symmetric matrix in a fixed assembly order: the `shared`
+/// entries' values lead `values`, then come the entries of `rows`/`cols` (the values'
+/// tail).
 #[derive(Debug, Clone, Default)]
 pub struct UpperTriplets {
+    pub shared: Option<Arc<SharedEntries>>,
     pub rows: Vec<u32>,
     pub cols: Vec<u32>,
     pub values: Vec<f64>,
 }
 
 impl UpperTriplets {
+    /// Triplets whose first values belong to `shared` (pushed with [`Self::push_shared`]).
+    pub fn with_shared(shared: Arc<SharedEntries>) -> Self {
+        Self {
+            shared: Some(shared),
+            ..Default::default()
+        }
+    }
+
     pub fn clear(&mut self) {
+        self.shared = None;
         self.rows.clear();
         self.cols.clear();
         self.values.clear();
+    }
+
+    /// Every (row, column, value), the shared entries first.
+    pub fn entries(&self) -> impl Iterator<Item = (usize, usize, f64)> + '_ {
+        let (shared_rows, shared_cols): (&[u32], &[u32]) = match &self.shared {
+            Some(s) => (&s.rows, &s.cols),
+            None => (&[], &[]),
+        };
+        shared_rows
+            .iter()
+            .chain(&self.rows)
+            .zip(shared_cols.iter().chain(&self.cols))
+            .zip(&self.values)
+            .map(|((&r, &c), &v)| (r as usize, c as usize, v))
+    }
+
+    /// The value of the next shared entry.
+    #[inline]
+    pub fn push_shared(&mut self, value: f64) {
+        self.values.push(value);
     }
 
     /// Add `value` at (i, j) of the symmetric matrix (stored as the upper entry).
@@ -154,8 +196,10 @@ fn solver_error(what: &str, e: impl std::fmt::Debug) -> FemError {
 /// indices: assembly emits the same element and pressure triplets in the same order every
 /// time (only the contact part at the end varies), so the common prefix of the index
 /// sequence keeps its slots and only the rest is searched in the pattern.
+/// The shared entries' slots are kept for as long as the same [`SharedEntries`] come.
 #[derive(Default)]
 struct SlotMap {
+    shared: Option<(Arc<SharedEntries>, Vec<usize>)>,
     rows: Vec<u32>,
     cols: Vec<u32>,
     slots: Vec<usize>,
@@ -173,6 +217,37 @@ fn fill_values_cached(
 ) -> Option<Vec<f64>> {
     let col_ptr = permuted.col_ptr();
     let row_idx = permuted.row_idx();
+    let slot = |r: u32, c: u32| -> Option<usize> {
+        let (pr, pc) = (inv[r as usize], inv[c as usize]);
+        let (ru, cu) = (pr.max(pc), pr.min(pc));
+        let range = col_ptr[cu]..col_ptr[cu + 1];
+        let k = row_idx[range.clone()].binary_search(&ru).ok()?;
+        Some(range.start + k)
+    };
+    let same_shared = match (&map.shared, &t.shared) {
+        (Some((a, _)), Some(b)) => Arc::ptr_eq(a, b),
+        (None, None) => true,
+        _ => false,
+    };
+    if !same_shared {
+        map.shared = None;
+        map.rows.clear();
+        map.cols.clear();
+        map.slots.clear();
+        if let Some(shared) = &t.shared {
+            let slots = shared
+                .rows
+                .iter()
+                .zip(&shared.cols)
+                .map(|(&r, &c)| slot(r, c))
+                .collect::<Option<Vec<usize>>>();
+            let Some(slots) = slots else {
+                *map = SlotMap::default();
+                return None;
+            };
+            map.shared = Some((Arc::clone(shared), slots));
+        }
+    }
     let prefix = map
         .rows
         .iter()
@@ -184,19 +259,17 @@ fn fill_values_cached(
     map.cols.truncate(prefix);
     map.slots.truncate(prefix);
     for (&r, &c) in t.rows[prefix..].iter().zip(&t.cols[prefix..]) {
-        let (pr, pc) = (inv[r as usize], inv[c as usize]);
-        let (ru, cu) = (pr.max(pc), pr.min(pc));
-        let range = col_ptr[cu]..col_ptr[cu + 1];
-        let Ok(k) = row_idx[range.clone()].binary_search(&ru) else {
+        let Some(k) = slot(r, c) else {
             *map = SlotMap::default();
             return None;
         };
         map.rows.push(r);
         map.cols.push(c);
-        map.slots.push(range.start + k);
+        map.slots.push(k);
     }
+    let shared_slots: &[usize] = map.shared.as_ref().map_or(&[], |(_, s)| s);
     let mut values = vec![0.0; row_idx.len()];
-    for (&slot, &v) in map.slots.iter().zip(&t.values) {
+    for (&slot, &v) in shared_slots.iter().chain(&map.slots).zip(&t.values) {
         values[slot] += v;
     }
     Some(values)
@@ -316,12 +389,8 @@ impl SymmetricSolver {
             .filter(|c| c.symbolic.nrows() == n)
             .and_then(|c| fill_values_cached(&c.permuted, &c.inv, t, &mut c.slots));
         if values.is_none() {
-            let mut pairs: Vec<Pair<usize, usize>> = t
-                .rows
-                .iter()
-                .zip(&t.cols)
-                .map(|(&r, &c)| Pair::new(r as usize, c as usize))
-                .collect();
+            let mut pairs: Vec<Pair<usize, usize>> =
+                t.entries().map(|(r, c, _)| Pair::new(r, c)).collect();
             pairs.extend(self.reserved.iter().filter(|p| p.col < n).copied());
             if let Some(old) = self.cache.as_ref().filter(|c| c.symbolic.nrows() == n) {
                 let col_ptr = old.symbolic.col_ptr();
@@ -663,8 +732,7 @@ mod tests {
     /// K x for the symmetric matrix given by its upper triplets.
     fn product(t: &UpperTriplets, x: &[f64]) -> Vec<f64> {
         let mut kx = vec![0.0; x.len()];
-        for ((&r, &c), &v) in t.rows.iter().zip(&t.cols).zip(&t.values) {
-            let (r, c) = (r as usize, c as usize);
+        for (r, c, v) in t.entries() {
             kx[r] += v * x[c];
             if r != c {
                 kx[c] += v * x[r];
@@ -727,6 +795,61 @@ mod tests {
                 (true, true) => (0, 1),
             };
             assert_eq!(fallbacks, expected, "shift {shift}, LU {with_lu}");
+        }
+    }
+
+    /// `t` with its first `k` entries moved into shared entries.
+    fn split_shared(t: &UpperTriplets, k: usize) -> UpperTriplets {
+        let shared = Arc::new(SharedEntries {
+            rows: t.rows[..k].to_vec(),
+            cols: t.cols[..k].to_vec(),
+        });
+        UpperTriplets {
+            shared: Some(shared),
+            rows: t.rows[k..].to_vec(),
+            cols: t.cols[k..].to_vec(),
+            values: t.values.clone(),
+        }
+    }
+
+    #[test]
+    fn shared_entries_are_the_same_matrix_as_plain_triplets() {
+        let plain = scrambled_grid(0.0);
+        let n = 49;
+        let rhs: Vec<f64> = (0..n).map(|i| (i as f64 * 0.37).cos()).collect();
+        let x_plain = SymmetricSolver::default().solve(n, &plain, &rhs).unwrap();
+        let mut solver = SymmetricSolver::default();
+        let shared = split_shared(&plain, 100);
+        let x_shared = solver.solve(n, &shared, &rhs).unwrap();
+        // the same values summed in the same order into the same layout
+        assert_eq!(x_shared, x_plain);
+        // the same shared entries again, with new values and another tail: slots reused,
+        // no new analysis
+        let mut again = shared.clone();
+        again.values.iter_mut().for_each(|v| *v *= 2.0);
+        again.rows.truncate(again.rows.len() - 1);
+        again.cols.truncate(again.cols.len() - 1);
+        again.values.truncate(again.values.len() - 1);
+        let x_again = solver.solve(n, &again, &rhs).unwrap();
+        for (a, b) in product(&again, &x_again).iter().zip(&rhs) {
+            assert!((a - b).abs() < 1e-10, "{a} vs {b}");
+        }
+        // equal entries behind another allocation: their slots are searched again
+        let other = split_shared(&plain, 60);
+        let x_other = solver.solve(n, &other, &rhs).unwrap();
+        assert_eq!(x_other, x_plain);
+        assert_eq!(solver.symbolic_analyses, 1);
+        // a shared entry outside the pattern extends it
+        let mut wider = plain.clone();
+        wider.add(3, 40, -0.1);
+        wider.rows.rotate_right(1);
+        wider.cols.rotate_right(1);
+        wider.values.rotate_right(1);
+        let wider = split_shared(&wider, 10);
+        let x_wider = solver.solve(n, &wider, &rhs).unwrap();
+        assert_eq!(solver.symbolic_analyses, 2);
+        for (a, b) in product(&wider, &x_wider).iter().zip(&rhs) {
+            assert!((a - b).abs() < 1e-10, "{a} vs {b}");
         }
     }
 }

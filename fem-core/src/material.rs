@@ -182,7 +182,9 @@ fn neo_hookean(mu: f64, beta: f64, h: &[f64; 5], p: f64, with_tangent: bool) -> 
         if !with_tangent {
             continue;
         }
-        for (b, &(k, l)) in COMPONENTS.iter().enumerate() {
+        // dP/dF is symmetric in (a, b) (the second derivative of the strain energy): the
+        // lower triangle is mirrored below
+        for (b, &(k, l)) in COMPONENTS.iter().enumerate().skip(a) {
             let delta = if i == k && jj == l { 1.0 } else { 0.0 };
             let iso = c
                 * (delta - 2.0 / 3.0 * f[i][jj] * finv[l][k] - 2.0 / 3.0 * finv[jj][i] * f[k][l]
@@ -191,6 +193,13 @@ fn neo_hookean(mu: f64, beta: f64, h: &[f64; 5], p: f64, with_tangent: bool) -> 
             // d2J/dF2 = J (F^{-1}_Lk F^{-1}_Ji - F^{-1}_Jk F^{-1}_Li)
             let vol = p * j * (finv[l][k] * finv[jj][i] - finv[jj][k] * finv[l][i]);
             tangent[a][b] = iso + vol;
+        }
+    }
+    if with_tangent {
+        for a in 1..5 {
+            for b in 0..a {
+                tangent[a][b] = tangent[b][a];
+            }
         }
     }
     if beta != 0.0 && with_tangent {

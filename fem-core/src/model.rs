@@ -9,12 +9,16 @@
 // Index loops mirror the tensor-index equations of the numerical kernels.
 #![allow(clippy::needless_range_loop)]
 
+use std::sync::{Arc, OnceLock};
+
 use crate::FemError;
 use crate::contact::ContactPair;
-use crate::element::{self, ElementGeometry, ElementVector, Formulation};
-use crate::linear_solver::{SymmetricSolver, UpperTriplets};
+use crate::element::{
+    self, ElementGeometry, ElementMatrix, ElementResult, ElementVector, Formulation,
+};
+use crate::linear_solver::{SharedEntries, SymmetricSolver, UpperTriplets};
 use crate::material::{Material, MaterialLaw};
-use crate::mesh::Mesh;
+use crate::mesh::{Mesh, MeshElement};
 use crate::pressure_load::{edge_volume, enclosed_volume};
 
 /// Newton–Raphson controls.
@@ -131,6 +135,10 @@ pub struct Model {
     solver: SymmetricSolver,
     /// Reference geometry of each element at its Gauss points (`None`: degenerate).
     geometry: Vec<Option<ElementGeometry>>,
+    /// The elements' tangent entries in assembly order (built on first use after the dof
+    /// numbering changes): every assembly emits them first, so only their values are
+    /// assembled and the solver keeps their positions in its pattern.
+    element_entries: OnceLock<Arc<SharedEntries>>,
     /// Total Newton iterations performed (diagnostic).
     pub newton_iterations: usize,
     /// CPU time spent in assembly and in the linear solver (diagnostic).
@@ -169,6 +177,7 @@ impl Model {
             .collect();
         let mut model = Self {
             geometry,
+            element_entries: OnceLock::new(),
             mesh,
             materials,
             formulation,
@@ -237,6 +246,39 @@ impl Model {
             }
         }
         self.n_equations = next;
+        self.element_entries = OnceLock::new();
+    }
+
+    /// Element `el`'s dofs (u_r, u_z per node).
+    fn element_dofs(el: &MeshElement) -> [usize; 18] {
+        std::array::from_fn(|k| 2 * el.nodes[k / 2] + k % 2)
+    }
+
+    /// The upper-triangle entries the elements' tangents fill, in the order
+    /// [`Self::assemble`] emits their values: per element, rows a and columns b >= a of its
+    /// free dofs.
+    fn element_entries(&self) -> Arc<SharedEntries> {
+        let entries = self.element_entries.get_or_init(|| {
+            let mut t = UpperTriplets::default();
+            for el in &self.mesh.elements {
+                let dofs = Self::element_dofs(el);
+                for a in 0..18 {
+                    let Some(ea) = self.equation[dofs[a]] else {
+                        continue;
+                    };
+                    for b in a..18 {
+                        if let Some(eb) = self.equation[dofs[b]] {
+                            t.add(ea, eb, 0.0);
+                        }
+                    }
+                }
+            }
+            Arc::new(SharedEntries {
+                rows: t.rows,
+                cols: t.cols,
+            })
+        });
+        Arc::clone(entries)
     }
 
     /// Prescribe dof `dof` (= 2 node + component) to `value`.
@@ -298,34 +340,41 @@ impl Model {
             ..Default::default()
         };
         if with_tangent {
-            let cap = self.mesh.elements.len() * 171;
-            asm.tangent.rows.reserve(cap);
-            asm.tangent.cols.reserve(cap);
-            asm.tangent.values.reserve(cap);
+            let shared = self.element_entries();
+            asm.tangent = UpperTriplets::with_shared(Arc::clone(&shared));
+            asm.tangent.values.reserve(shared.rows.len());
         }
         let mut internal = vec![0.0; n_dofs];
+        let mut res = ElementResult {
+            residual: ElementVector::zeros(),
+            tangent: ElementMatrix::zeros(),
+            min_jacobian: f64::INFINITY,
+            mean_pressure_kpa: 0.0,
+        };
         for (el, geometry) in self.mesh.elements.iter().zip(&self.geometry) {
-            let dofs: [usize; 18] = std::array::from_fn(|k| 2 * el.nodes[k / 2] + k % 2);
+            let dofs = Self::element_dofs(el);
             let ue = ElementVector::from_fn(|k, _| u[dofs[k]]);
-            let res = element::evaluate_geometry(
+            element::evaluate_geometry_into(
                 geometry.as_ref()?,
                 &ue,
                 &self.materials[el.body],
                 self.formulation,
                 with_tangent,
+                &mut res,
             )?;
             asm.min_jacobian = asm.min_jacobian.min(res.min_jacobian);
             for a in 0..18 {
                 internal[dofs[a]] += res.residual[a];
             }
             if with_tangent {
+                // the values of element_entries(), in its order
                 for a in 0..18 {
-                    let Some(ea) = self.equation[dofs[a]] else {
+                    if self.equation[dofs[a]].is_none() {
                         continue;
-                    };
+                    }
                     for b in a..18 {
-                        if let Some(eb) = self.equation[dofs[b]] {
-                            asm.tangent.add(ea, eb, res.tangent[(a, b)]);
+                        if self.equation[dofs[b]].is_some() {
+                            asm.tangent.push_shared(res.tangent[(a, b)]);
                         }
                     }
                 }

@@ -67,8 +67,7 @@ fn assembled_tangent_matches_finite_differences_in_contact() {
         let j = eq[d];
         let mut column = vec![0.0; k];
         let t = &asm.tangent;
-        for ((&r, &c), &v) in t.rows.iter().zip(&t.cols).zip(&t.values) {
-            let (r, c) = (r as usize, c as usize);
+        for (r, c, v) in t.entries() {
             if c == j {
                 column[r] += v;
             }

@@ -47,8 +47,7 @@ fn frictional_tangent_matches_finite_differences_of_the_residual() {
     let multiply = |with_skew: bool| {
         let mut y = vec![0.0; n];
         let t = &asm.tangent;
-        for ((&r, &c), &val) in t.rows.iter().zip(&t.cols).zip(&t.values) {
-            let (r, c) = (r as usize, c as usize);
+        for (r, c, val) in t.entries() {
             y[r] += val * v[c];
             if r != c {
                 y[c] += val * v[r];
