@@ -49,6 +49,18 @@ pub struct ElementResult {
     pub mean_pressure_kpa: f64,
 }
 
+impl ElementResult {
+    /// A result to evaluate into ([`evaluate_geometry_into`]).
+    pub fn zeroed() -> Self {
+        Self {
+            residual: ElementVector::zeros(),
+            tangent: ElementMatrix::zeros(),
+            min_jacobian: f64::INFINITY,
+            mean_pressure_kpa: 0.0,
+        }
+    }
+}
+
 /// Integration-point geometry of the reference configuration. The gradient operator
 /// `G` (H = G u_e) is stored by its non-zero entries: per node `a`, `dN_a/dR` (rows dR of
 /// u_r and of u_z), `dN_a/dZ` (rows dZ) and `N_a / R` (the hoop row, u_r only).
@@ -225,12 +237,7 @@ pub fn evaluate_geometry(
     formulation: Formulation,
     with_tangent: bool,
 ) -> Option<ElementResult> {
-    let mut out = ElementResult {
-        residual: ElementVector::zeros(),
-        tangent: ElementMatrix::zeros(),
-        min_jacobian: f64::INFINITY,
-        mean_pressure_kpa: 0.0,
-    };
+    let mut out = ElementResult::zeroed();
     evaluate_geometry_into(geometry, u, mat, formulation, with_tangent, &mut out)?;
     Some(out)
 }

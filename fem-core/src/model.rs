@@ -13,9 +13,7 @@ use std::sync::{Arc, OnceLock};
 
 use crate::FemError;
 use crate::contact::ContactPair;
-use crate::element::{
-    self, ElementGeometry, ElementMatrix, ElementResult, ElementVector, Formulation,
-};
+use crate::element::{self, ElementGeometry, ElementResult, ElementVector, Formulation};
 use crate::linear_solver::{SharedEntries, SymmetricSolver, UpperTriplets};
 use crate::material::{Material, MaterialLaw};
 use crate::mesh::{Mesh, MeshElement};
@@ -345,12 +343,7 @@ impl Model {
             asm.tangent.values.reserve(shared.rows.len());
         }
         let mut internal = vec![0.0; n_dofs];
-        let mut res = ElementResult {
-            residual: ElementVector::zeros(),
-            tangent: ElementMatrix::zeros(),
-            min_jacobian: f64::INFINITY,
-            mean_pressure_kpa: 0.0,
-        };
+        let mut res = ElementResult::zeroed();
         for (el, geometry) in self.mesh.elements.iter().zip(&self.geometry) {
             let dofs = Self::element_dofs(el);
             let ue = ElementVector::from_fn(|k, _| u[dofs[k]]);
