@@ -70,17 +70,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
     }
     let s1 = &ind.stage1_stats;
-    let s2 = &ind.model.stats;
+    // every mesh of stage 2 (the band's moves rebuild the model)
+    let work = ind.stage2_work();
+    let s2 = &work.stats;
     let failed = ind.attempts.iter().filter(|a| !a.converged).count();
     println!(
         "stage 1: {} solves, {} assemblies, {} factorisations, {} residual-only assemblies",
         s1.newton_solves, s1.assemblies, s1.factorizations, s1.residual_assemblies
     );
     println!(
-        "stage 2: {} attempts ({} failed) for {} steps, {} Newton solves ({} failed), {} \
+        "stage 2 ({} meshes): {} attempts ({} failed) for {} steps, {} Newton solves ({} failed), {} \
          assemblies, {} factorisations, {} residual-only assemblies ({:.1} full and {:.1} \
          residual-only assemblies per step), assembly {:.3} s, linear \
          {:.3} s, fallbacks (LDLT, LU) {:?}",
+        ind.band_moves + 1,
         ind.attempts.len(),
         failed,
         curve.points.len() - 1,
@@ -91,9 +94,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         s2.residual_assemblies,
         s2.assemblies as f64 / (curve.points.len() - 1) as f64,
         s2.residual_assemblies as f64 / (curve.points.len() - 1) as f64,
-        ind.model.assembly_seconds,
-        ind.model.solve_seconds,
-        ind.model.solver_fallbacks()
+        work.assembly_seconds,
+        work.solve_seconds,
+        work.fallbacks
     );
     println!("curve solve {seconds:.3} s");
     if std::env::var_os("FEM_TRACE_POINTS").is_some() {

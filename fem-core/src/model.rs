@@ -165,6 +165,41 @@ pub struct SolverStats {
     pub last_history: Vec<f64>,
 }
 
+impl SolverStats {
+    /// Add the counters of `other` (the residual history stays this one's).
+    pub fn add(&mut self, other: &SolverStats) {
+        self.newton_solves += other.newton_solves;
+        self.failed_solves += other.failed_solves;
+        self.assemblies += other.assemblies;
+        self.factorizations += other.factorizations;
+        self.residual_assemblies += other.residual_assemblies;
+        self.resolves += other.resolves;
+        self.unsymmetric_factorizations += other.unsymmetric_factorizations;
+    }
+}
+
+/// The Newton work of one or more models: counters, time in assembly and in the linear
+/// solver, and the linear solver's fallbacks (LDL^T, LU).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct NewtonWork {
+    pub stats: SolverStats,
+    pub assembly_seconds: f64,
+    pub solve_seconds: f64,
+    pub fallbacks: (usize, usize),
+}
+
+impl NewtonWork {
+    /// Add the work of `model`.
+    pub fn add_model(&mut self, model: &Model) {
+        self.stats.add(&model.stats);
+        self.assembly_seconds += model.assembly_seconds;
+        self.solve_seconds += model.solve_seconds;
+        let (ldlt, lu) = model.solver_fallbacks();
+        self.fallbacks.0 += ldlt;
+        self.fallbacks.1 += lu;
+    }
+}
+
 impl Model {
     pub fn new(mesh: Mesh, materials: Vec<Material>, formulation: Formulation) -> Self {
         let n_dofs = 2 * mesh.nodes.len();

@@ -28,7 +28,7 @@ use crate::mesh::{
     ArcGrading, Mesh, SampleGeometry, SampleGrading, SampleMesh, ShellDivisions, ShellGeometry,
     ShellMesh, add_sample, add_sample_with_edges, add_shell_with_arc_edges, refined_edges,
 };
-use crate::model::{Model, NewtonFailure, NewtonSettings};
+use crate::model::{Model, NewtonFailure, NewtonSettings, NewtonWork};
 
 /// Slip rate (mm of slip per mm of tube travel) at which the regularised Coulomb law reaches
 /// its full value. Measured (E2 464.2 kPa, p_air 15 kPa, mu 0.4, mesh level -2): the friction
@@ -372,6 +372,9 @@ pub struct Indentation {
     pub band_move_failures: usize,
     /// The band of fine elements of this mesh, if it has one.
     pub edge_window: Option<EdgeWindow>,
+    /// Newton work of stage 2 on the meshes before this one (the band's earlier meshes and
+    /// its moves that did not converge); [`Indentation::stage2_work`] adds this model's.
+    pub earlier_meshes: NewtonWork,
 }
 
 /// Diagnostic record of one attempted stage-2 step: the target travel, whether it
@@ -551,7 +554,15 @@ impl Indentation {
             band_moves: 0,
             band_move_failures: 0,
             edge_window: settings.mesh.edge_window,
+            earlier_meshes: NewtonWork::default(),
         }
+    }
+
+    /// The Newton work of stage 2 on every mesh it used so far.
+    pub fn stage2_work(&self) -> NewtonWork {
+        let mut work = self.earlier_meshes.clone();
+        work.add_model(&self.model);
+        work
     }
 
     /// Prescribe the tube travel h (downwards positive).
@@ -1090,6 +1101,7 @@ impl Indentation {
         self.stage1_stats = old.stage1_stats.clone();
         self.band_moves = old.band_moves;
         self.band_move_failures = old.band_move_failures;
+        self.earlier_meshes = old.stage2_work();
         u_new
     }
 
@@ -1503,6 +1515,7 @@ pub(crate) fn solve_stages(
                         break;
                     }
                     ind.attempts = std::mem::take(&mut moved.attempts);
+                    ind.earlier_meshes.add_model(&moved.model);
                     ind.snap_through_path = std::mem::take(&mut moved.snap_through_path);
                     (moved, moved_state, next, result) = attempt_move(&mut ind, target, tangent);
                     moved_to = target;
@@ -1517,6 +1530,7 @@ pub(crate) fn solve_stages(
                     }
                     Err(failure) => {
                         ind.attempts = std::mem::take(&mut moved.attempts);
+                        ind.earlier_meshes.add_model(&moved.model);
                         ind.snap_through_path = std::mem::take(&mut moved.snap_through_path);
                         ind.band_move_failures += 1;
                         let margin = 0.25 * b.half_width_mm;

@@ -37,6 +37,18 @@ fn a_band_moved_along_the_curve_ends_where_a_fixed_band_does() {
         "the edge travels ~1.5 mm: the band moved {} times",
         moving.indentation.band_moves
     );
+    // the Newton work of stage 2 counts every mesh: each logged step attempt's solves, on
+    // whichever mesh it ran, is one Newton solve of the totals (the last mesh alone holds
+    // only those after the last move)
+    let logged: usize = moving
+        .indentation
+        .attempts
+        .iter()
+        .map(|a| a.solves.len())
+        .sum();
+    let work = moving.indentation.stage2_work();
+    assert_eq!(work.stats.newton_solves, logged);
+    assert!(moving.indentation.model.stats.newton_solves < logged);
     let end = moving.complete().unwrap();
     let end = end.points.last().unwrap();
 
