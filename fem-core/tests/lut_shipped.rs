@@ -1,14 +1,16 @@
 //! The shipped default table, fem-core/data/default.lut: it verifies (format version and
 //! content hash), covers the default grid's axes, and — the slow `#[ignore]` test —
 //! regenerating a sample of its curves with the recorded parameters, mesh level and solver
-//! settings reproduces the stored numbers. Run the slow test with
+//! settings reproduces the stored numbers; the converged table, default-fine.lut, likewise
+//! records the band's current settings and (ignored) reproduces two of its curves. Run the slow test with
 //! `cargo test -p fem-core --release --test lut_shipped -- --ignored`.
 
 // Test helpers outside #[test] functions may unwrap too (clippy.toml allows it only inside them).
 #![allow(clippy::unwrap_used)]
 
 use fem_core::lut::{
-    EffectSelection, LutFile, LutQuery, OutOfRange, fem_solver_description, read_lut,
+    EffectSelection, GridIndex, LutFile, LutQuery, OutOfRange, edge_band_solver_description,
+    fem_solver_description, read_lut,
 };
 use std::path::PathBuf;
 
@@ -131,6 +133,93 @@ fn regenerating_sample_curves_reproduces_the_stored_ones() {
             assert!(
                 (p.volume_mm3 - stored.volume_mm3[k]).abs() < 1e-7 * stored.volume_mm3[k],
                 "{what}: volume"
+            );
+        }
+    }
+}
+
+fn converged() -> LutFile {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data/default-fine.lut");
+    read_lut(&path).unwrap()
+}
+
+/// The converged table (`default-fine.lut`) records the band's settings it was solved with;
+/// they must be the band's current ones, or the table is stale (rebuild it with
+/// `tactile lut build --grid default --edge-band --out fem-core/data/default-fine.lut`). No
+/// solve: a change of the band's mesh, Newton or linear-solver settings fails here at once.
+#[test]
+fn the_converged_table_records_the_bands_current_settings() {
+    let f = converged();
+    assert_eq!(
+        f.lut.solver,
+        edge_band_solver_description(&f.lut.grid),
+        "the edge band's settings changed since default-fine.lut was built"
+    );
+    assert!(f.lut.edge_band.is_some());
+}
+
+#[test]
+#[ignore = "slow: re-solves two curves with the edge band, about 20 s in release; cargo test -p fem-core --release --test lut_shipped -- --ignored"]
+fn regenerating_converged_curves_reproduces_the_stored_ones() {
+    let f = converged();
+    let lut = &f.lut;
+    // two curves that are quick with the band: the stiffest sample at the highest pressure,
+    // and the paper's range (215 kPa at 6 kPa), whose band moves about 15 times
+    let g = &lut.grid;
+    let node = |e: f64| {
+        g.modulus_kpa
+            .iter()
+            .position(|&m| (m - e).abs() < 0.5)
+            .unwrap()
+    };
+    let at = |modulus: usize, pressure_kpa: f64| {
+        let pressure = g
+            .pressure_kpa
+            .iter()
+            .position(|&p| p == pressure_kpa)
+            .unwrap();
+        g.flat_index(GridIndex {
+            modulus,
+            pressure,
+            ..Default::default()
+        })
+    };
+    for index in [at(g.modulus_kpa.len() - 1, 30.0), at(node(215.4), 6.0)] {
+        let params = g.curve_params(index);
+        let stored = lut.curve(index).unwrap();
+        let curve = fem_core::Simulation::new(&params)
+            .with_edge_band()
+            .solve()
+            .unwrap()
+            .complete()
+            .unwrap();
+        assert_eq!(curve.points.len(), stored.len(), "curve {index}");
+        // Same code and settings, so the same numbers (bit for bit on the machine that
+        // built the table). The band's Newton stops at a relative residual of 1e-6, but a
+        // rerun takes the same iterations, so its states differ only by the round-off of
+        // CPU-dependent SIMD kernels, as in the production table's test above; a step cut
+        // or a band moved at another step would show as the band's own scatter (~1 um in
+        // a), which these bounds exclude.
+        for (k, p) in curve.points.iter().enumerate() {
+            let what = format!("curve {index} ({}), step {k}", g.describe(index));
+            assert!((p.h_mm - stored.h_mm[k]).abs() < 1e-12, "{what}: h");
+            assert!(
+                (p.u_s_mm - stored.u_s_mm[k]).abs() < 1e-7,
+                "{what}: u_s {} vs {}",
+                p.u_s_mm,
+                stored.u_s_mm[k]
+            );
+            assert!(
+                (p.a_mm - stored.a_mm[k]).abs() < 1e-6,
+                "{what}: a {} vs {}",
+                p.a_mm,
+                stored.a_mm[k]
+            );
+            assert!(
+                (p.load_n - stored.load_n[k]).abs() < 1e-7 * stored.load_n[k].abs().max(1e-3),
+                "{what}: P {} vs {}",
+                p.load_n,
+                stored.load_n[k]
             );
         }
     }

@@ -80,32 +80,45 @@ pub fn build_fem_lut(
                     "the edge band solves frictionless curves only; the grid has friction".into(),
                 ));
             }
-            let simulation = |p: &CurveParams| crate::Simulation::new(p).with_edge_band();
             let solver = |p: &CurveParams| {
-                let solution = simulation(p).solve()?;
+                let solution = band_simulation(p).solve()?;
                 if let crate::StopReason::Stopped { error, .. } = &solution.stop {
                     on_stop(p, error);
                 }
                 Ok::<_, crate::FemError>(solution.curve)
             };
-            let base = simulation(&grid.curve_params(0));
-            let newton = &base.nonlinear_solver;
-            let description = format!(
-                "{FEM_CORE_SOLVER} with {:?}, Newton relative tolerance {:e}, stagnation \
-                 limit {}, multiplier predictor {}, {}; {}",
-                base.solver_settings(),
-                newton.relative_tolerance,
-                newton.stagnation_limit,
-                newton.predict_multipliers,
-                linear_solvers_of(grid, simulation),
-                crate::problem::OUTPUT_DEFINITIONS
-            );
+            let description = edge_band_solver_description(grid);
             let mut lut = build_lut(grid, shard, &solver, &description, on_curve)?;
-            lut.edge_band = base.discretisation.edge_band;
+            lut.edge_band = band_simulation(&grid.curve_params(0))
+                .discretisation
+                .edge_band;
             lut.contact_radius_error = Some(crate::discretisation::EDGE_BAND);
             Ok(lut)
         }
     }
+}
+
+/// How a [`TableSolve::EdgeBand`] table solves its curves.
+fn band_simulation(params: &CurveParams) -> crate::Simulation {
+    crate::Simulation::new(params).with_edge_band()
+}
+
+/// Description of fem-core's solver with the band of fine elements at the contact edge
+/// ([`TableSolve::EdgeBand`]) for the curves of `grid`: its settings (mesh, band, Newton
+/// and each pressure's linear solver) as recorded in the tables it builds.
+pub fn edge_band_solver_description(grid: &LutGrid) -> String {
+    let base = band_simulation(&grid.curve_params(0));
+    let newton = &base.nonlinear_solver;
+    format!(
+        "{FEM_CORE_SOLVER} with {:?}, Newton relative tolerance {:e}, stagnation \
+         limit {}, multiplier predictor {}, {}; {}",
+        base.solver_settings(),
+        newton.relative_tolerance,
+        newton.stagnation_limit,
+        newton.predict_multipliers,
+        linear_solvers_of(grid, band_simulation),
+        crate::problem::OUTPUT_DEFINITIONS
+    )
 }
 
 /// The linear solver settings of the grid's curves: one `{:?}` if every curve has the

@@ -71,7 +71,7 @@ pub struct LutGrid {
 }
 
 /// Position of one curve on the grid (indices into the axes).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct GridIndex {
     pub stiffening: usize,
     pub material: usize,
