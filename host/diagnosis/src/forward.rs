@@ -293,6 +293,11 @@ pub struct ForwardSelection {
     /// Whether the radius and the load agree under the final model; None when no effect was
     /// added, or without a load channel with its joint covariance.
     pub consistency: Option<ChannelConsistency>,
+    /// chi^2 over both channels of the final model (its last step's fit to both; None when
+    /// no effect was added).
+    pub final_total_chi2: Option<f64>,
+    /// The search also tried from a candidate the loads kept out of step 1, if it was.
+    pub look_ahead: Option<LookAhead>,
 }
 
 fn gap_of(label: &str, f: &GlsFit, load: Option<(&LoadChannel, f64)>) -> GapSummary {
@@ -338,9 +343,131 @@ fn named_effects(model: &Model<'_>, cand: &Candidate, f: &GlsFit) -> Vec<NamedEf
 }
 
 /// Continues the search after the first step `first` (run on `model` without included
-/// effects among `cands`): adds its winner when the verdict is `effect` and repeats.
+/// effects among `cands`): adds its winner when the verdict is `effect` and repeats. When the
+/// radius prefers a candidate that the loads alone kept out of step 1, the search is also
+/// tried from that candidate and kept if it explains both channels better
+/// ([`LookAhead`]).
 #[allow(clippy::too_many_arguments)]
 pub fn run(
+    model: &Model<'_>,
+    cands: &[Candidate],
+    points: &[Point],
+    subset: &[usize],
+    noise: &NoiseModel,
+    whitener: &Whitener,
+    options: &DiagnoseOptions,
+    first: &StepOutcome,
+) -> ForwardSelection {
+    let primary = search(
+        model, cands, points, subset, noise, whitener, options, first,
+    );
+    let Some(tried) = look_ahead_candidate(first, &primary) else {
+        return primary;
+    };
+    let mut from_tried = first.clone();
+    from_tried.decision = Decision {
+        verdict: Verdict::Effect,
+        winner: Some(tried),
+        group: Vec::new(),
+    };
+    let alternative = search(
+        model,
+        cands,
+        points,
+        subset,
+        noise,
+        whitener,
+        options,
+        &from_tried,
+    );
+    // each effect must buy at least the step's calibrated threshold of chi^2 over both
+    // channels (the largest improvement a candidate reaches on noise alone, 95 %)
+    let penalty = first.threshold.delta_chi2_95;
+    let score = |f: &ForwardSelection| {
+        f.final_total_chi2
+            .map(|c| c + penalty * f.effects.len() as f64)
+    };
+    let (primary_score, alternative_score) = (score(&primary), score(&alternative));
+    let accepted = alternative.effects.len() >= 2
+        && alternative.stop.verdict != Verdict::Unexplained
+        && alternative.consistency.as_ref().is_none_or(|c| c.agree)
+        && matches!((alternative_score, primary_score), (Some(a), Some(p)) if a < p);
+    let record = LookAhead {
+        tried: first.screened[tried].label.clone(),
+        primary: primary.effects.iter().map(|e| e.label.clone()).collect(),
+        alternative: alternative
+            .effects
+            .iter()
+            .map(|e| e.label.clone())
+            .collect(),
+        primary_score,
+        alternative_score,
+        penalty_per_effect: penalty,
+        accepted,
+        winner: tried,
+    };
+    let mut chosen = if accepted { alternative } else { primary };
+    chosen.look_ahead = Some(record);
+    chosen
+}
+
+/// The step-1 candidate the search is also tried from: the one with the largest radius
+/// refit gain among those that pass the threshold, when the loads alone kept it out (its
+/// held-out radius prediction is better than the baseline's, its held-out load prediction
+/// worse) and the radius prefers it to the effect the search named first. Only when the
+/// search named something: on data it explains with nothing, nothing is tried.
+fn look_ahead_candidate(first: &StepOutcome, primary: &ForwardSelection) -> Option<usize> {
+    let named_first = primary.effects.first()?;
+    let winner = first.decision.winner?;
+    let winner_gain = first.screened[winner].delta_chi2?;
+    let (best, s) = first
+        .screened
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| s.passes_threshold && s.fit.is_some())
+        .max_by(|(_, a), (_, b)| {
+            a.delta_chi2
+                .unwrap_or(0.0)
+                .total_cmp(&b.delta_chi2.unwrap_or(0.0))
+        })?;
+    let h = s.held_out.as_ref()?;
+    let radius_better = h.candidate_chi2 < h.baseline_chi2;
+    let load_worse = matches!(
+        (h.load_candidate_chi2, h.load_baseline_chi2),
+        (Some(c), Some(b)) if c > b
+    );
+    (s.label != named_first.label
+        && !h.confirms
+        && radius_better
+        && load_worse
+        && s.delta_chi2? > winner_gain)
+        .then_some(best)
+}
+
+/// The search from a candidate the loads alone kept out of step 1 ([`run`]).
+#[derive(Debug, Clone, Serialize)]
+pub struct LookAhead {
+    /// The candidate the search was also started from.
+    pub tried: String,
+    /// The effects of the search as step 1 decided, and of the search from `tried`.
+    pub primary: Vec<String>,
+    pub alternative: Vec<String>,
+    /// chi^2 over both channels of each search's final model plus `penalty_per_effect`
+    /// per effect (None without an effect or a load channel).
+    pub primary_score: Option<f64>,
+    pub alternative_score: Option<f64>,
+    pub penalty_per_effect: f64,
+    /// Whether the search from `tried` is the one reported (it names at least two effects,
+    /// leaves no unexplained misfit, its radius and load agree, and it scores lower).
+    pub accepted: bool,
+    /// Index of `tried` among step 1's screened candidates.
+    #[serde(skip)]
+    pub winner: usize,
+}
+
+/// [`run`] without the look-ahead.
+#[allow(clippy::too_many_arguments)]
+fn search(
     model: &Model<'_>,
     cands: &[Candidate],
     points: &[Point],
@@ -362,6 +489,7 @@ pub fn run(
     let mut effects: Vec<NamedEffect> = Vec::new();
     let mut final_fit: Option<(GlsFit, GapSummary)> = None;
     let mut final_model: Option<(Model<'_>, String)> = None;
+    let mut final_total_chi2: Option<f64> = None;
     let stop = loop {
         // an ambiguous first step still names its best effect (the report's `effect`), but
         // the search does not build on a choice the data cannot make
@@ -437,6 +565,7 @@ pub fn run(
             after: after.clone(),
         });
         effects = named;
+        final_total_chi2 = Some(w.total_chi2()).filter(|c| c.is_finite());
         // the model of the next step: the included effects at their refitted values, plus
         // the new one
         let mut next = current_model.clone();
@@ -563,5 +692,7 @@ pub fn run(
         final_model,
         modulus_before_kpa: first.base.modulus_kpa,
         modulus_after_kpa,
+        final_total_chi2,
+        look_ahead: None,
     }
 }

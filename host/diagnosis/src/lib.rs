@@ -465,7 +465,6 @@ pub fn diagnose(
     // 5. verdict (decided in the step above)
     let n = subset.len();
     let minimum_detectable = verdict::minimum_detectable(&sigs, t95);
-    let winner = decision.winner.map(|i| screened[i].clone());
 
     // 6. forward selection: what remains once the named effect is in the model; then
     // whether the radius and the load agree under its final model (consistency.rs): when
@@ -473,6 +472,17 @@ pub fn diagnose(
     let forward = forward::run(
         &model, &cands, &points, &subset, &noise, &whitener, options, &first,
     );
+    // the search from a candidate the loads kept out of step 1 names the first effect when
+    // it is the one kept (forward::run)
+    let decision = match &forward.look_ahead {
+        Some(l) if l.accepted => verdict::Decision {
+            verdict: Verdict::Effect,
+            winner: Some(l.winner),
+            group: Vec::new(),
+        },
+        _ => decision,
+    };
+    let winner = decision.winner.map(|i| screened[i].clone());
     let outside_library = forward.consistency.as_ref().is_some_and(|c| !c.agree);
     // ... and when nothing is named because the radius fits the baseline, whether the load
     // does too (an effect that the radius does not show, such as a leak's falling pressure)

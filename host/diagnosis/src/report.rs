@@ -399,6 +399,27 @@ fn forward_text(s: &mut String, d: &Diagnosis) {
             _ => String::new(),
         }
     );
+    if let Some(l) = &f.look_ahead {
+        let score = |v: Option<f64>| v.map_or("-".into(), |v| format!("{v:.1}"));
+        let list = |v: &[String]| {
+            if v.is_empty() {
+                "nothing".to_string()
+            } else {
+                v.join(" + ")
+            }
+        };
+        let _ = writeln!(
+            s,
+            "  look-ahead: step 1's best radius fit, {}, was kept out by the loads alone; the search from it found {} (score {}) against {} (score {}; chi2 of both channels plus {:.1} per effect): {}",
+            l.tried,
+            list(&l.alternative),
+            score(l.alternative_score),
+            list(&l.primary),
+            score(l.primary_score),
+            l.penalty_per_effect,
+            if l.accepted { "kept" } else { "not kept" }
+        );
+    }
     // grouped by the included effect and the reason
     let mut groups: Vec<(&str, &str, Vec<&str>)> = Vec::new();
     for n in &f.not_testable {
