@@ -9,8 +9,8 @@
 #![allow(clippy::unwrap_used)]
 
 use fem_core::lut::{
-    EffectSelection, GridIndex, LutFile, LutQuery, OutOfRange, edge_band_solver_description,
-    fem_solver_description, read_lut,
+    EffectSelection, GridIndex, LutCurve, LutFile, LutQuery, OutOfRange,
+    edge_band_solver_description, fem_solver_description, read_lut,
 };
 use std::path::PathBuf;
 
@@ -109,32 +109,39 @@ fn regenerating_sample_curves_reproduces_the_stored_ones() {
         // are 5 orders below the ~1e-2 mm discretisation error, so any model change shows.
         // a is a continuous function of the state (problem::contact_edge_mm) with
         // sensitivity da/dg <= ~1e2 near the edge, hence 1e-6 mm for it.
-        for (k, p) in curve.points.iter().enumerate() {
-            let what = format!("curve {index} ({}), step {k}", lut.grid.describe(index));
-            assert!((p.h_mm - stored.h_mm[k]).abs() < 1e-12, "{what}: h");
-            assert!(
-                (p.u_s_mm - stored.u_s_mm[k]).abs() < 1e-7,
-                "{what}: u_s {} vs {}",
-                p.u_s_mm,
-                stored.u_s_mm[k]
-            );
-            assert!(
-                (p.a_mm - stored.a_mm[k]).abs() < 1e-6,
-                "{what}: a {} vs {}",
-                p.a_mm,
-                stored.a_mm[k]
-            );
-            assert!(
-                (p.load_n - stored.load_n[k]).abs() < 1e-7 * stored.load_n[k].abs().max(1e-3),
-                "{what}: P {} vs {}",
-                p.load_n,
-                stored.load_n[k]
-            );
-            assert!(
-                (p.volume_mm3 - stored.volume_mm3[k]).abs() < 1e-7 * stored.volume_mm3[k],
-                "{what}: volume"
-            );
-        }
+        assert_reproduces(&curve, &stored, &lut.grid.describe(index));
+    }
+}
+
+/// Every step of the re-solved `curve` matches the `stored` one to the tolerances that allow
+/// only CPU-dependent round-off (see the production table's test): h to 1e-12 mm, u_s to
+/// 1e-7 mm, a to 1e-6 mm, P and the volume to 1e-7 relative.
+fn assert_reproduces(curve: &fem_core::Curve, stored: &LutCurve, what: &str) {
+    for (k, p) in curve.points.iter().enumerate() {
+        let what = format!("{what}, step {k}");
+        assert!((p.h_mm - stored.h_mm[k]).abs() < 1e-12, "{what}: h");
+        assert!(
+            (p.u_s_mm - stored.u_s_mm[k]).abs() < 1e-7,
+            "{what}: u_s {} vs {}",
+            p.u_s_mm,
+            stored.u_s_mm[k]
+        );
+        assert!(
+            (p.a_mm - stored.a_mm[k]).abs() < 1e-6,
+            "{what}: a {} vs {}",
+            p.a_mm,
+            stored.a_mm[k]
+        );
+        assert!(
+            (p.load_n - stored.load_n[k]).abs() < 1e-7 * stored.load_n[k].abs().max(1e-3),
+            "{what}: P {} vs {}",
+            p.load_n,
+            stored.load_n[k]
+        );
+        assert!(
+            (p.volume_mm3 - stored.volume_mm3[k]).abs() < 1e-7 * stored.volume_mm3[k],
+            "{what}: volume"
+        );
     }
 }
 
@@ -200,28 +207,7 @@ fn regenerating_converged_curves_reproduces_the_stored_ones() {
         // CPU-dependent SIMD kernels, as in the production table's test above; a step cut
         // or a band moved at another step would show as the band's own scatter (~1 um in
         // a), which these bounds exclude.
-        for (k, p) in curve.points.iter().enumerate() {
-            let what = format!("curve {index} ({}), step {k}", g.describe(index));
-            assert!((p.h_mm - stored.h_mm[k]).abs() < 1e-12, "{what}: h");
-            assert!(
-                (p.u_s_mm - stored.u_s_mm[k]).abs() < 1e-7,
-                "{what}: u_s {} vs {}",
-                p.u_s_mm,
-                stored.u_s_mm[k]
-            );
-            assert!(
-                (p.a_mm - stored.a_mm[k]).abs() < 1e-6,
-                "{what}: a {} vs {}",
-                p.a_mm,
-                stored.a_mm[k]
-            );
-            assert!(
-                (p.load_n - stored.load_n[k]).abs() < 1e-7 * stored.load_n[k].abs().max(1e-3),
-                "{what}: P {} vs {}",
-                p.load_n,
-                stored.load_n[k]
-            );
-        }
+        assert_reproduces(&curve, &stored, &g.describe(index));
     }
 }
 
