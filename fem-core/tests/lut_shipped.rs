@@ -109,7 +109,7 @@ fn regenerating_sample_curves_reproduces_the_stored_ones() {
         // are 5 orders below the ~1e-2 mm discretisation error, so any model change shows.
         // a is a continuous function of the state (problem::contact_edge_mm) with
         // sensitivity da/dg <= ~1e2 near the edge, hence 1e-6 mm for it.
-        assert_reproduces(&curve, &stored, &lut.grid.describe(index));
+        assert_reproduces(&curve, stored, &lut.grid.describe(index));
     }
 }
 
@@ -207,7 +207,7 @@ fn regenerating_converged_curves_reproduces_the_stored_ones() {
         // CPU-dependent SIMD kernels, as in the production table's test above; a step cut
         // or a band moved at another step would show as the band's own scatter (~1 um in
         // a), which these bounds exclude.
-        assert_reproduces(&curve, &stored, &g.describe(index));
+        assert_reproduces(&curve, stored, &g.describe(index));
     }
 }
 

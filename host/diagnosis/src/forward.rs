@@ -296,7 +296,7 @@ pub struct ForwardSelection {
     /// chi^2 over both channels of the final model (its last step's fit to both; None when
     /// no effect was added).
     pub final_total_chi2: Option<f64>,
-    /// The search also tried from a candidate the loads kept out of step 1, if it was.
+    /// The search also tried from step 1's best radius fit, if it was.
     pub look_ahead: Option<LookAhead>,
 }
 
@@ -344,9 +344,9 @@ fn named_effects(model: &Model<'_>, cand: &Candidate, f: &GlsFit) -> Vec<NamedEf
 
 /// Continues the search after the first step `first` (run on `model` without included
 /// effects among `cands`): adds its winner when the verdict is `effect` and repeats. When the
-/// radius prefers a candidate that the loads alone kept out of step 1, the search is also
-/// tried from that candidate and kept if it explains both channels better
-/// ([`LookAhead`]).
+/// radius prefers a candidate that step 1 did not choose (the loads kept it out, or it came
+/// second over both channels), the search is also tried from that candidate and kept if it
+/// explains both channels better ([`LookAhead`]).
 #[allow(clippy::too_many_arguments)]
 pub fn run(
     model: &Model<'_>,
@@ -361,7 +361,7 @@ pub fn run(
     let primary = search(
         model, cands, points, subset, noise, whitener, options, first,
     );
-    let Some(tried) = look_ahead_candidate(first, &primary) else {
+    let Some(tried) = look_ahead_candidate(first) else {
         return primary;
     };
     let mut from_tried = first.clone();
@@ -383,9 +383,19 @@ pub fn run(
     // each effect must buy at least the step's calibrated threshold of chi^2 over both
     // channels (the largest improvement a candidate reaches on noise alone, 95 %)
     let penalty = first.threshold.delta_chi2_95;
+    // the baseline's chi^2 over both channels (a search that added nothing ends there): a
+    // refitted candidate's joint chi^2 plus its gain
+    let baseline_total = first
+        .screened
+        .iter()
+        .find_map(|s| Some(s.joint_fit.as_ref()?.chi2 + s.delta_joint_chi2?));
     let score = |f: &ForwardSelection| {
-        f.final_total_chi2
-            .map(|c| c + penalty * f.effects.len() as f64)
+        let total = if f.effects.is_empty() {
+            baseline_total
+        } else {
+            f.final_total_chi2
+        };
+        total.map(|c| c + penalty * f.effects.len() as f64)
     };
     let (primary_score, alternative_score) = (score(&primary), score(&alternative));
     let accepted = alternative.effects.len() >= 2
@@ -412,14 +422,18 @@ pub fn run(
 }
 
 /// The step-1 candidate the search is also tried from: the one with the largest radius
-/// refit gain among those that pass the threshold, when the loads alone kept it out (its
-/// held-out radius prediction is better than the baseline's, its held-out load prediction
-/// worse) and the radius prefers it to the effect the search named first. Only when the
-/// search named something: on data it explains with nothing, nothing is tried.
-fn look_ahead_candidate(first: &StepOutcome, primary: &ForwardSelection) -> Option<usize> {
-    let named_first = primary.effects.first()?;
-    let winner = first.decision.winner?;
-    let winner_gain = first.screened[winner].delta_chi2?;
+/// refit gain among those that pass the threshold, when it is not step 1's best (the effect
+/// named first, or the best of an `unexplained` step, if it has one) but fits the radius
+/// better, and its held-out radius prediction is better than the baseline's: either the
+/// loads alone kept it out (its held-out load prediction worse than the baseline's) or it
+/// passed and lost the ranking over both channels. Only when step 1's verdict is not `none`:
+/// on data the baseline explains, nothing is tried.
+fn look_ahead_candidate(first: &StepOutcome) -> Option<usize> {
+    if first.decision.verdict == Verdict::None {
+        return None;
+    }
+    let named_first = first.decision.winner.map(|w| &first.screened[w]);
+    let winner_gain = named_first.map_or(Some(0.0), |w| w.delta_chi2)?;
     let (best, s) = first
         .screened
         .iter()
@@ -436,15 +450,15 @@ fn look_ahead_candidate(first: &StepOutcome, primary: &ForwardSelection) -> Opti
         (h.load_candidate_chi2, h.load_baseline_chi2),
         (Some(c), Some(b)) if c > b
     );
-    (s.label != named_first.label
-        && !h.confirms
+    (named_first.is_none_or(|w| s.label != w.label)
+        && (h.confirms || load_worse)
         && radius_better
-        && load_worse
         && s.delta_chi2? > winner_gain)
         .then_some(best)
 }
 
-/// The search from a candidate the loads alone kept out of step 1 ([`run`]).
+/// The search from step 1's best radius fit when step 1 chose another candidate or none
+/// ([`run`]).
 #[derive(Debug, Clone, Serialize)]
 pub struct LookAhead {
     /// The candidate the search was also started from.

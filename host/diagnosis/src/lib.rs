@@ -472,8 +472,8 @@ pub fn diagnose(
     let forward = forward::run(
         &model, &cands, &points, &subset, &noise, &whitener, options, &first,
     );
-    // the search from a candidate the loads kept out of step 1 names the first effect when
-    // it is the one kept (forward::run)
+    // the search from step 1's best radius fit names the first effect when it is the one
+    // kept (forward::run)
     let decision = match &forward.look_ahead {
         Some(l) if l.accepted => verdict::Decision {
             verdict: Verdict::Effect,

@@ -410,7 +410,7 @@ fn forward_text(s: &mut String, d: &Diagnosis) {
         };
         let _ = writeln!(
             s,
-            "  look-ahead: step 1's best radius fit, {}, was kept out by the loads alone; the search from it found {} (score {}) against {} (score {}; chi2 of both channels plus {:.1} per effect): {}",
+            "  look-ahead: step 1's best radius fit, {}, was not its choice; the search from it found {} (score {}) against {} (score {}; chi2 of both channels plus {:.1} per effect): {}",
             l.tried,
             list(&l.alternative),
             score(l.alternative_score),

@@ -208,3 +208,62 @@ fn loads_the_baseline_cannot_fit_are_unexplained_when_the_radius_names_nothing()
         "the note names the 15 kPa load windows only: {note}"
     );
 }
+
+#[test]
+#[ignore]
+fn zz_scan() {
+    use EffectKind::*;
+    let cases: Vec<(Vec<(EffectKind, f64)>, u64)> = vec![
+        (vec![], 31),
+        (vec![], 32),
+        (vec![], 33),
+        (vec![], 34),
+        (vec![(FiniteThickness, 3.0)], 41),
+        (vec![(FiniteThickness, 1.5)], 42),
+        (vec![(Friction, 0.4)], 43),
+        (vec![(Friction, 0.2)], 44),
+        (vec![(StrainStiffening, 10.0)], 45),
+        (vec![(Viscoelastic, 0.35)], 46),
+        (vec![(Adhesion, 120.0)], 47),
+        (vec![(RadiusOffset, 0.05)], 48),
+        (vec![(RadiusScale, 0.04)], 49),
+        (vec![(RadiusScale, 0.015)], 50),
+        (vec![(DisplacementOffset, 0.06)], 51),
+        (vec![(PressureOffset, 2.0)], 52),
+        (vec![(FiniteThickness, 1.5), (DisplacementOffset, 0.04)], 53),
+        (vec![(Friction, 0.3), (DisplacementOffset, 0.04)], 54),
+        (vec![(RadiusScale, 0.03), (PressureOffset, 2.0)], 55),
+        (vec![(Friction, 0.2), (RadiusScale, 0.02)], 23),
+        (vec![(Friction, 0.3), (RadiusScale, 0.03)], 24),
+        (vec![(Friction, 0.4), (RadiusScale, 0.03)], 25),
+        (vec![(Friction, 0.3), (RadiusScale, 0.02)], 26),
+        (vec![(Friction, 0.4), (RadiusScale, 0.02)], 27),
+        (vec![(Friction, 0.2), (RadiusScale, 0.03)], 28),
+    ];
+    for (truth, seed) in cases {
+        let (base, effects) = shipped_tables().expect("shipped tables");
+        let model = Model::new(&base, &effects).expect("model");
+        let pts = synthetic(&model, &truth, seed);
+        let d = diagnose(&base, &effects, pts, &options()).expect("diagnose");
+        let la = d
+            .forward
+            .look_ahead
+            .as_ref()
+            .map(|l| {
+                format!(
+                    "look-ahead tried {} -> {:?} ({})",
+                    l.tried,
+                    l.alternative,
+                    if l.accepted { "kept" } else { "not kept" }
+                )
+            })
+            .unwrap_or_default();
+        println!(
+            "truth {:?} seed {seed}: {} {:?} E2 {:.1} {la}",
+            truth,
+            d.verdict.as_str(),
+            names(&d),
+            d.forward.modulus_after_kpa
+        );
+    }
+}
