@@ -1,9 +1,9 @@
 //! The shipped default table, fem-core/data/default.lut: it verifies (format version and
 //! content hash), covers the default grid's axes, and — the slow `#[ignore]` test —
 //! regenerating a sample of its curves with the recorded parameters, mesh level and solver
-//! settings reproduces the stored numbers; the converged table, default-fine.lut, likewise
-//! records the band's current settings and (ignored) reproduces two of its curves. Run the slow test with
-//! `cargo test -p fem-core --release --test lut_shipped -- --ignored`.
+//! settings reproduces the stored numbers; the converged table, default-fine.lut, records
+//! the band's current settings and (ignored) reproduces two of its curves. Run the slow
+//! tests with `cargo test -p fem-core --release --test lut_shipped -- --ignored`.
 
 // Test helpers outside #[test] functions may unwrap too (clippy.toml allows it only inside them).
 #![allow(clippy::unwrap_used)]
@@ -171,7 +171,7 @@ fn regenerating_converged_curves_reproduces_the_stored_ones() {
     let f = converged();
     let lut = &f.lut;
     // two curves that are quick with the band: the stiffest sample at the highest pressure,
-    // and the paper's range (215 kPa at 6 kPa), whose band moves about 15 times
+    // and the paper's range (215 kPa at 6 kPa), whose band moves along the whole curve
     let g = &lut.grid;
     let node = |e: f64| {
         g.modulus_kpa
