@@ -22,7 +22,7 @@ for s in "${seeds[@]}"; do
     scale=${scales[$((s % 2))]}
     case="friction=$mu,radius_scale=$scale"
     dir="$out/$case-$s"
-    [ -f "$dir/simulated.csv" ] || target/release/tactile diagnose --simulate "$case" --seed "$s" --out "$dir" >/dev/null 2>&1
+    [ -f "$dir/simulated.csv" ] || target/release/tactile diagnose --simulate "$case" --seed "$s" --out "$dir" --truth-cache "$out/truth" >/dev/null 2>&1
     report=$(target/release/tactile diagnose "$dir/simulated.csv" --reruns 0 --seed "$s" 2>&1)
     verdict=$(echo "$report" | grep -m1 '^verdict:' | sed 's/^verdict: //')
     model=$(echo "$report" | grep -m1 '^  final model:' | sed 's/^  final model: //; s/ ([^()]*)//g')

@@ -2,7 +2,8 @@
 //! time: the contact mechanics are direct fem-core solves at the sample's true parameters
 //! ([`truth_curves`]: a converged solve of the sample at the truth's off-grid modulus and
 //! true internal pressure, plus a real thinner layer, real friction or the Yeoh
-//! stiffening law as the difference of two solves at the effect tables' settings) read by
+//! stiffening law as the difference of two solves one mesh level finer than the effect
+//! tables) read by
 //! hil-sim's curve mechanics; the history and measurement effects are hil-sim's own code (`effects::EffectState` for
 //! viscoelastic relaxation and adhesion, `EffectsConfig::camera_radius_mm` and
 //! `proximity_error_mm` for the camera and proximity effects).
@@ -17,6 +18,8 @@
 //! error per indentation (0.03 mN, the mean of the pre-contact samples). The `test` column
 //! marks the replicates; `p_air_kpa` is the set point (the manometer's reading).
 
+use std::path::{Path, PathBuf};
+
 use hil_sim::effects::{EffectState, EffectsConfig, ViscoelasticConfig};
 use hil_sim::mechanics::MechanicsModel;
 use hil_sim::rng::SimRng;
@@ -24,7 +27,7 @@ use hil_sim::scenario::{MechanicsSource, Scenario};
 
 use super::candidates::EffectKind;
 use super::data::Point;
-use super::tables::{EFFECT_MAX_DEPTH_MM, EffectAxis};
+use super::tables::{EFFECT_MAX_DEPTH_MM, EFFECT_MESH_LEVEL, EFFECT_STEPS};
 use fem_core::{Curve, CurveParams};
 
 /// Mesh level of the truth's sample: the production mesh with the band of fine elements
@@ -40,6 +43,13 @@ pub const TRUTH_MESH_LEVEL: i32 = 0;
 pub const TRUTH_STEPS: usize = 38;
 /// Final tube travel of the truth solves.
 pub const TRUTH_MAX_DEPTH_MM: f64 = 1.9;
+/// Mesh level of the two solves whose difference is the truth's physical table effect (a
+/// thinner layer, friction, Yeoh stiffening): one level finer than the effect tables the
+/// diagnosis reads it from (half their element size), so that the effect's change is not
+/// carried by the diagnosis's own mesh. At mu = 0.4, 170 kPa, friction's change of the
+/// contact radius on the tables' mesh is within about 3 um of this level's, where the
+/// coarser level -2 was up to 7 um off in wiggles of alternating sign along the curve.
+pub const TRUTH_EFFECT_MESH_LEVEL: i32 = EFFECT_MESH_LEVEL + 1;
 
 /// The truth's solve settings for the plain 7 mm sample at (E2, p_air): the converged
 /// table's mesh and step, to [`TRUTH_MAX_DEPTH_MM`] (solve them with
@@ -266,11 +276,25 @@ pub enum TruthError {
     Curves(#[from] hil_sim::mechanics::MechanicsError),
     #[error("the viscoelastic truth needs curves at several moduli")]
     ViscoelasticNeedsModulusAxis,
+    #[error("truth cache {}: {reason}", path.display())]
+    Cache { path: PathBuf, reason: String },
 }
 
 /// The truth mechanics of a scenario (the expensive part: fem-core solves, each kept up to
 /// its last converged step, [`fem_core::StopReason`]; see [`truth_curves`]).
 pub fn truth_mechanics(scenario: &Scenario) -> Result<Truth, TruthError> {
+    truth_mechanics_cached(scenario, None)
+}
+
+/// [`truth_mechanics`] with the truth's curves kept in the folder `cache` (created when
+/// missing): a scenario whose solves were made before (the same curve parameters, truth
+/// settings and effect-solve settings) reads them back instead of solving again. The
+/// studies that simulate one sample under many seeds use it; the noise and hil-sim's
+/// effects are drawn anew each time.
+pub fn truth_mechanics_cached(
+    scenario: &Scenario,
+    cache: Option<&Path>,
+) -> Result<Truth, TruthError> {
     if !matches!(scenario.mechanics, MechanicsSource::Solve { .. }) {
         let mechanics = hil_sim::mechanics_source::build_mechanics(scenario)?;
         return Ok(Truth {
@@ -278,7 +302,10 @@ pub fn truth_mechanics(scenario: &Scenario) -> Result<Truth, TruthError> {
             reached_travel_mm: f64::INFINITY,
         });
     }
-    let curves = truth_curves(scenario)?;
+    let curves = match cache {
+        Some(dir) => truth_curves_cached(scenario, dir)?,
+        None => truth_curves(scenario)?,
+    };
     let reached = curves
         .iter()
         .map(|c| c.points.last().map_or(0.0, |q| q.h_mm))
@@ -299,12 +326,11 @@ pub fn truth_mechanics(scenario: &Scenario) -> Result<Truth, TruthError> {
 /// The sample's elastic response is the converged solve (mesh level
 /// [`TRUTH_MESH_LEVEL`] with the edge band) of the 7 mm frictionless neo-Hookean sample at
 /// the exact modulus and pressure. A physical table effect (a thinner sample, friction,
-/// Yeoh stiffening) is added as the difference of two solves at the effect tables' mesh
-/// and steps, with and without it, at equal tube travel: the edge band is for
-/// frictionless samples, and a friction solve on the converged mesh would take minutes.
-/// The diagnosis reads its effects as the same kind of difference (its tables' slices
-/// minus their base), so a table effect is tested at its discretisation, while the
-/// sample it acts on has none.
+/// Yeoh stiffening) is added as the difference of two solves one mesh level finer than
+/// the effect tables ([`TRUTH_EFFECT_MESH_LEVEL`], the tables' step), with and without it,
+/// at equal tube travel: the edge band is for frictionless samples. The diagnosis reads
+/// its effects as the same kind of difference (its tables' slices minus their base), so
+/// neither the sample nor its effect shares the diagnosis's mesh.
 pub fn truth_curves(scenario: &Scenario) -> Result<Vec<Curve>, TruthError> {
     let solve = |params: &CurveParams, edge_band: bool| -> Result<Curve, TruthError> {
         let simulation = fem_core::Simulation::new(params);
@@ -337,20 +363,14 @@ pub fn truth_curves(scenario: &Scenario) -> Result<Vec<Curve>, TruthError> {
             out.push(sample);
             continue;
         }
-        // the two solves at the settings of the table that holds the effect (its mesh level
-        // and step), to one step short of its last travel
-        let axis = if params.friction != 0.0 {
-            EffectAxis::Friction
-        } else if params.sample_stiffening != 0.0 {
-            EffectAxis::Stiffening
-        } else {
-            EffectAxis::Thickness
-        };
-        let steps = axis.steps() - 1;
+        // the two solves one mesh level finer than the effect tables (the truth must not
+        // share the diagnosis's mesh), at the tables' step, to one step short of their last
+        // travel
+        let steps = EFFECT_STEPS - 1;
         let at_table_settings = |p: &CurveParams| CurveParams {
-            mesh_level: axis.mesh_level(),
+            mesh_level: TRUTH_EFFECT_MESH_LEVEL,
             steps,
-            max_depth_mm: EFFECT_MAX_DEPTH_MM * steps as f64 / axis.steps() as f64,
+            max_depth_mm: EFFECT_MAX_DEPTH_MM * steps as f64 / EFFECT_STEPS as f64,
             ..p.clone()
         };
         let with_effect = solve(&at_table_settings(&params), false)?;
@@ -358,6 +378,80 @@ pub fn truth_curves(scenario: &Scenario) -> Result<Vec<Curve>, TruthError> {
         out.push(with_table_effect(sample, &with_effect, &without, params));
     }
     Ok(out)
+}
+
+/// What a cached truth is keyed by: every curve's parameters and the settings of its
+/// solves.
+#[derive(serde::Serialize, serde::Deserialize, PartialEq)]
+struct TruthKey {
+    curves: Vec<CurveParams>,
+    effect_mesh_level: i32,
+    effect_steps: usize,
+    effect_max_depth_mm: f64,
+}
+
+#[derive(serde::Deserialize)]
+struct CachedTruth {
+    key: TruthKey,
+    curves: Vec<Curve>,
+}
+
+#[derive(serde::Serialize)]
+struct CachedTruthRef<'a> {
+    key: &'a TruthKey,
+    curves: &'a [Curve],
+}
+
+/// The cache file of `scenario`'s truth in `dir`, and the key stored in it.
+fn cache_file(scenario: &Scenario, dir: &Path) -> Result<(TruthKey, PathBuf), TruthError> {
+    let key = TruthKey {
+        curves: hil_sim::mechanics_source::solve_params(scenario),
+        effect_mesh_level: TRUTH_EFFECT_MESH_LEVEL,
+        effect_steps: EFFECT_STEPS,
+        effect_max_depth_mm: EFFECT_MAX_DEPTH_MM,
+    };
+    let key_json = serde_json::to_string(&key).map_err(|e| TruthError::Cache {
+        path: dir.to_path_buf(),
+        reason: e.to_string(),
+    })?;
+    // FNV-1a: stable across builds, unlike std's hasher
+    let hash = key_json.bytes().fold(0xcbf2_9ce4_8422_2325_u64, |h, b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
+    });
+    let path = dir.join(format!("truth-{hash:016x}.json"));
+    Ok((key, path))
+}
+
+/// [`truth_curves`] read from or written to `dir` (one JSON file per truth, named by a hash
+/// of its key; the key is stored in the file and compared, so a hash collision re-solves).
+fn truth_curves_cached(scenario: &Scenario, dir: &Path) -> Result<Vec<Curve>, TruthError> {
+    let (key, path) = cache_file(scenario, dir)?;
+    if let Ok(text) = std::fs::read_to_string(&path) {
+        let cached: CachedTruth = serde_json::from_str(&text).map_err(|e| TruthError::Cache {
+            path: path.clone(),
+            reason: format!("{e} (delete the file to solve it again)"),
+        })?;
+        if cached.key == key {
+            return Ok(cached.curves);
+        }
+    }
+    let curves = truth_curves(scenario)?;
+    let cache_error = |reason: String| TruthError::Cache {
+        path: path.clone(),
+        reason,
+    };
+    std::fs::create_dir_all(dir).map_err(|e| cache_error(e.to_string()))?;
+    let text = serde_json::to_string(&CachedTruthRef {
+        key: &key,
+        curves: &curves,
+    })
+    .map_err(|e| cache_error(e.to_string()))?;
+    // written whole and then renamed, so that a study running two simulations of one sample
+    // at once never reads half a file
+    let partial = path.with_extension(format!("json.{}", std::process::id()));
+    std::fs::write(&partial, text).map_err(|e| cache_error(e.to_string()))?;
+    std::fs::rename(&partial, &path).map_err(|e| cache_error(e.to_string()))?;
+    Ok(curves)
 }
 
 /// `sample` plus (`with_effect` - `without`) in u_s, a and the load at equal tube travel
@@ -487,8 +581,13 @@ pub fn simulate_with(spec: &SimSpec, scenario: &Scenario, truth: &Truth) -> Vec<
 
 /// Builds the truth and simulates (one call).
 pub fn simulate(spec: &SimSpec) -> Result<Vec<Point>, TruthError> {
+    simulate_cached(spec, None)
+}
+
+/// [`simulate`] with the truth's solves kept in `cache` ([`truth_mechanics_cached`]).
+pub fn simulate_cached(spec: &SimSpec, cache: Option<&Path>) -> Result<Vec<Point>, TruthError> {
     let scenario = truth_scenario(spec);
-    let truth = truth_mechanics(&scenario)?;
+    let truth = truth_mechanics_cached(&scenario, cache)?;
     Ok(simulate_with(spec, &scenario, &truth))
 }
 
@@ -518,6 +617,38 @@ pub fn to_curve_csv(points: &[Point], note: &str) -> Result<String, fit::curve_c
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_cached_truth_is_read_back_and_a_damaged_cache_file_is_named() {
+        let dir = std::env::temp_dir().join(format!("truth-cache-test-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("temporary folder");
+        let scenario = truth_scenario(&SimSpec::default());
+        let (key, path) = cache_file(&scenario, &dir).expect("key");
+        assert_eq!(key.curves.len(), 2, "one truth curve per pressure");
+        // a stored truth with this key is returned as stored, without solving
+        let stored = vec![curve(10, 0.1, 0.0), curve(10, 0.1, 0.01)];
+        let text = serde_json::to_string(&CachedTruthRef {
+            key: &key,
+            curves: &stored,
+        })
+        .expect("serialise");
+        std::fs::write(&path, text).expect("write");
+        let read = truth_curves_cached(&scenario, &dir).expect("cached truth");
+        assert_eq!(read, stored);
+        // another sample has another file
+        let other = truth_scenario(&SimSpec {
+            modulus_kpa: 171.0,
+            ..SimSpec::default()
+        });
+        assert_ne!(cache_file(&other, &dir).expect("key").1, path);
+        // a damaged file is an error naming it, not a silent re-solve
+        std::fs::write(&path, "{\"key\": 3").expect("write");
+        match truth_curves_cached(&scenario, &dir) {
+            Err(TruthError::Cache { path: named, .. }) => assert_eq!(named, path),
+            other => panic!("expected a cache error, got {other:?}"),
+        }
+        std::fs::remove_dir_all(&dir).expect("clean up");
+    }
 
     /// A curve of `n` steps of `dh` mm: u_s = 0.5 h, a = 2 h (0 at h = 0), load = 0.1 h.
     fn curve(n: usize, dh: f64, shift: f64) -> Curve {

@@ -1,10 +1,9 @@
 //! The effect tables the diagnosis reads: fem-core lookup tables over modulus x pressure with
 //! one varied effect axis each (sample thickness, friction, strain stiffening), on the
-//! production mesh (level 0, 0.05 mm steps of tube travel; friction on level -2, see
-//! [`FRICTION_MESH_LEVEL`]). The diagnosis reads them only as
+//! production mesh (level 0, 0.05 mm steps of tube travel). The diagnosis reads them only as
 //! changes from their base slice (the slice at the axis' base value), added to the converged
-//! baseline ([`converged_baseline`]); the simulated truth adds its table effects the same
-//! way (`simulate::truth_curves`). An effect's change is carried far better than the contact
+//! baseline ([`converged_baseline`]); the simulated truth adds its physical effects the same
+//! way, from solves one mesh level finer (`simulate::truth_curves`). An effect's change is carried far better than the contact
 //! radius itself: 2.4-3.9 um RMS from converged solves at level 0, against 5-19 um at level -2
 //! (`tests/tests/diagnose_effect_deltas.rs`).
 //!
@@ -17,21 +16,14 @@ use std::path::{Path, PathBuf};
 use fem_core::CurveParams;
 use fem_core::lut::{EffectSelection, GridIndex, Lut, LutCurve, LutGrid, log_spaced};
 
-/// Mesh level of the thickness and stiffening tables (and of the simulated truth's effects
-/// read from them): the production mesh. The band of fine elements at the contact edge
+/// Mesh level of the effect tables: the production mesh (the simulated truth solves its
+/// effects one level finer, `simulate::TRUTH_EFFECT_MESH_LEVEL`). The band of fine elements at the contact edge
 /// would carry an effect's change to about a micrometre, but costs 5-8 times the time (the
 /// 650 curves would take hours) and solves no frictional curve.
 pub const EFFECT_MESH_LEVEL: i32 = 0;
 /// Load steps per curve of those tables (to `EFFECT_MAX_DEPTH_MM`): 0.05 mm of travel, the
 /// converged table's.
 pub const EFFECT_STEPS: usize = 40;
-/// Mesh level of the friction table: level -2. On the production mesh friction changes the
-/// contact radius far less (its change is mostly in the load), and the selection, which
-/// screens candidates on the radius, no longer finds a friction of 0.4 at 170 kPa (it names
-/// a radius offset); see docs/diagnosis.md, Effect tables.
-pub const FRICTION_MESH_LEVEL: i32 = -2;
-/// Load steps per curve of the friction table (0.1 mm of travel).
-pub const FRICTION_STEPS: usize = 20;
 /// Final tube travel of every curve.
 pub const EFFECT_MAX_DEPTH_MM: f64 = 2.0;
 /// Internal pressures of the effect tables.
@@ -83,22 +75,6 @@ impl EffectAxis {
         }
     }
 
-    /// Mesh level of this axis' table.
-    pub fn mesh_level(self) -> i32 {
-        match self {
-            Self::Friction => FRICTION_MESH_LEVEL,
-            Self::Thickness | Self::Stiffening => EFFECT_MESH_LEVEL,
-        }
-    }
-
-    /// Load steps per curve of this axis' table (to `EFFECT_MAX_DEPTH_MM`).
-    pub fn steps(self) -> usize {
-        match self {
-            Self::Friction => FRICTION_STEPS,
-            Self::Thickness | Self::Stiffening => EFFECT_STEPS,
-        }
-    }
-
     /// The values of this axis in a table's grid.
     pub fn values_in(self, grid: &LutGrid) -> &[f64] {
         match self {
@@ -137,7 +113,7 @@ impl EffectAxis {
     }
 }
 
-/// The base curve parameters of the thickness and stiffening tables (and of the simulated
+/// The base curve parameters of every effect table (and of the simulated
 /// truth).
 pub fn effect_base_params() -> CurveParams {
     CurveParams {
@@ -148,22 +124,13 @@ pub fn effect_base_params() -> CurveParams {
     }
 }
 
-/// The base curve parameters of the table that varies `axis` (its mesh level and steps).
-pub fn effect_params(axis: EffectAxis) -> CurveParams {
-    CurveParams {
-        steps: axis.steps(),
-        mesh_level: axis.mesh_level(),
-        ..effect_base_params()
-    }
-}
-
 /// The grid of the table that varies `axis`: E2 10–1000 kPa (13 log-spaced, the default
 /// table's nodes up to 1000 kPa; friction: 46.4–681 kPa) x p_air 6 and 15 kPa (thickness: [`BASE_PRESSURES_KPA`])
 /// x the axis values.
 pub fn effect_grid(axis: EffectAxis) -> LutGrid {
     let mut grid = LutGrid::with_axes(
         &format!("effects-{}", axis_name(axis)),
-        effect_params(axis),
+        effect_base_params(),
         log_spaced(10.0, 1000.0, 13),
         match axis {
             EffectAxis::Thickness => BASE_PRESSURES_KPA.to_vec(),
@@ -380,8 +347,8 @@ mod tests {
             grid.validate().unwrap();
             assert_eq!(axis.values_in(&grid).len(), axis.axis_values().len());
             assert!(axis.values_in(&grid).contains(&axis.base_value()));
-            assert_eq!(grid.base.mesh_level, axis.mesh_level());
-            assert_eq!(grid.base.steps, axis.steps());
+            assert_eq!(grid.base.mesh_level, EFFECT_MESH_LEVEL);
+            assert_eq!(grid.base.steps, EFFECT_STEPS);
             for p in EFFECT_PRESSURES_KPA {
                 assert!(grid.pressure_kpa.contains(&p));
             }

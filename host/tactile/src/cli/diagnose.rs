@@ -66,6 +66,10 @@ pub struct DiagnoseArgs {
     /// Noise level for --simulate (1 = the demo's).
     #[arg(long, default_value_t = 1.0)]
     pub noise: f64,
+    /// With --simulate: keep the truth's fem-core solves in this folder and reuse them for
+    /// the same sample (studies over many seeds of one sample).
+    #[arg(long, value_name = "DIR")]
+    pub truth_cache: Option<PathBuf>,
     /// Run the confusion-matrix study and write it (Markdown) to this file.
     #[arg(long, value_name = "FILE")]
     pub confusion: Option<PathBuf>,
@@ -231,7 +235,7 @@ fn load_tables(args: &DiagnoseArgs) -> Result<Tables, String> {
 
 fn simulate(args: &DiagnoseArgs, spec: &str) -> ExitCode {
     use diagnosis::candidates::EffectKind;
-    use diagnosis::simulate::{Hidden, Outside, SimSpec, simulate, to_curve_csv};
+    use diagnosis::simulate::{Hidden, Outside, SimSpec, simulate_cached, to_curve_csv};
     // EFFECT=SIZE[,EFFECT=SIZE...]: several hidden effects at once
     let mut all_hidden: Vec<Hidden> = Vec::new();
     let mut outside: Option<Outside> = None;
@@ -292,7 +296,7 @@ fn simulate(args: &DiagnoseArgs, spec: &str) -> ExitCode {
         ..SimSpec::default()
     };
     let start = Instant::now();
-    let points = match simulate(&sim) {
+    let points = match simulate_cached(&sim, args.truth_cache.as_deref()) {
         Ok(p) => p,
         Err(e) => {
             eprintln!("error: simulation: {e}");
