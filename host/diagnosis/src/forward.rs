@@ -100,7 +100,7 @@ pub fn step(
     // after an effect is added, a candidate may also pass by its gain in the fit to both
     // channels, against that gain's own calibrated threshold: the same bootstrap on the
     // signatures whitened in both channels together (module notes)
-    let joint_calibration = load
+    let joint_threshold = load
         .as_ref()
         .and_then(|lc| lc.joint.as_ref())
         .filter(|_| !model.included.is_empty())
@@ -113,15 +113,13 @@ pub fn step(
                 Whitening::Joint(j),
                 prelim.base.modulus_kpa,
             );
-            let threshold = selection::bootstrap_threshold(
+            selection::bootstrap_threshold(
                 &joint_sigs,
                 j.len(),
                 options.bootstrap,
                 options.seed ^ JOINT_THRESHOLD_SEED,
-            );
-            (joint_sigs, threshold)
+            )
         });
-    let joint_threshold = joint_calibration.as_ref().map(|(_, t)| t.clone());
     let base = prelim.base;
     let sigs = prelim.sigs;
     let mut screened = selection::screen_and_refit(
@@ -134,12 +132,7 @@ pub fn step(
         t95,
         options.refit,
         load.as_ref(),
-        joint_calibration
-            .as_ref()
-            .map(|(sigs, t)| selection::JointScreen {
-                sigs,
-                threshold: t.delta_chi2_95,
-            }),
+        joint_threshold.as_ref().map(|t| t.delta_chi2_95),
     );
     for s in screened.iter_mut() {
         if let Some(f) = &s.fit

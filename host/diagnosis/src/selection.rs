@@ -498,10 +498,6 @@ pub struct Screened {
     pub joint_fit: Option<GlsFit>,
     /// Joint chi^2 of the model without the candidate minus the candidate's.
     pub delta_joint_chi2: Option<f64>,
-    /// Linearised gain in both channels together at the model's own joint fit (forward
-    /// steps after the first, with loads): it brings a candidate the radius screens low
-    /// into the refits when it passes the joint threshold.
-    pub joint_screen_delta_chi2: Option<f64>,
     /// Passed by its joint chi^2 gain against the joint threshold (forward steps after the
     /// first; [`super::forward::step`]), not by its radius gain.
     pub passes_joint_threshold: bool,
@@ -521,17 +517,9 @@ impl Screened {
     }
 }
 
-/// The joint screening of the forward steps after the first: the candidates' signatures
-/// whitened in both channels together and the calibrated threshold of their gain.
-#[derive(Debug, Clone, Copy)]
-pub struct JointScreen<'s> {
-    pub sigs: &'s [Signature],
-    pub threshold: f64,
-}
-
 /// Screens every candidate and fully refits the best `refit` (always including the best
-/// variant of each effect among them), and every further one whose screening gain passes
-/// the threshold on the radius or, with `joint_screen`, on both channels.
+/// variant of each effect among them) and every further one whose screening gain passes
+/// the threshold.
 #[allow(clippy::too_many_arguments)]
 pub fn screen_and_refit(
     model: &Model<'_>,
@@ -543,9 +531,8 @@ pub fn screen_and_refit(
     threshold: f64,
     refit: usize,
     load: Option<&LoadChannel>,
-    joint_screen: Option<JointScreen<'_>>,
+    joint_threshold: Option<f64>,
 ) -> Vec<Screened> {
-    let joint_threshold = joint_screen.as_ref().map(|j| j.threshold);
     let mut out: Vec<Screened> = sigs
         .iter()
         .filter(|s| s.local)
@@ -568,7 +555,6 @@ pub fn screen_and_refit(
             delta_load_chi2: None,
             joint_fit: None,
             delta_joint_chi2: None,
-            joint_screen_delta_chi2: None,
             passes_joint_threshold: false,
         })
         .collect();
@@ -577,48 +563,14 @@ pub fn screen_and_refit(
     // the model's own fit to both channels, against which the joint refits are measured
     // (made when the first candidate needs it)
     let joint = load.and_then(|lc| lc.joint.as_ref());
-    let joint_base_fit = || {
-        joint.and_then(|j| {
-            fit_to(
-                model,
-                None,
-                points,
-                subset,
-                Objective::Joint(j),
-                base.modulus_kpa,
-                0.0,
-                JOINT_MAX_ITERATIONS,
-            )
-        })
-    };
     let mut joint_base: Option<Option<GlsFit>> = None;
-    // after an effect is added: each candidate's linearised gain in both channels together,
-    // at the model's own fit to both
-    if let Some(js) = &joint_screen {
-        let bj = joint_base.get_or_insert_with(joint_base_fit);
-        if let Some(bj) = bj.as_ref() {
-            for s in out.iter_mut() {
-                s.joint_screen_delta_chi2 = js
-                    .sigs
-                    .iter()
-                    .filter(|g| g.candidate == s.candidate)
-                    .map(|g| g.score(&bj.whitened))
-                    .reduce(f64::max);
-            }
-        }
-    }
     let mut refitted_kinds = Vec::new();
     for s in out.iter_mut() {
         // the best `refit` effects, and every further one whose linearised gain alone
-        // passes the threshold, on the radius or (after the first step) on both channels:
-        // an effect the radius shows little of, such as friction on a converged mesh, can
-        // screen far down on the radius and still be the one the loads need
-        let passes_joint_screen = joint_threshold
-            .zip(s.joint_screen_delta_chi2)
-            .is_some_and(|(t, d)| d > t);
-        if refitted_kinds.len() >= refit && s.screen_delta_chi2 <= threshold && !passes_joint_screen
-        {
-            continue;
+        // passes the threshold: an effect the radius shows little of, such as friction on
+        // a converged mesh, can screen fourth and still be the one the loads need
+        if refitted_kinds.len() >= refit && s.screen_delta_chi2 <= threshold {
+            break;
         }
         if refitted_kinds.contains(&s.candidate.kind) && s.candidate.tau_h_mm.is_none() {
             continue;
@@ -661,8 +613,21 @@ pub fn screen_and_refit(
                 // the joint fit ranks the candidates that may pass (the same gate as the
                 // held-out check's); those far below the threshold are never named
                 if let Some(j) = joint
-                    && (d > 0.5 * threshold || passes_joint_screen)
-                    && let Some(bj) = joint_base.get_or_insert_with(joint_base_fit).as_ref()
+                    && d > 0.5 * threshold
+                    && let Some(bj) = joint_base
+                        .get_or_insert_with(|| {
+                            fit_to(
+                                model,
+                                None,
+                                points,
+                                subset,
+                                Objective::Joint(j),
+                                base.modulus_kpa,
+                                0.0,
+                                JOINT_MAX_ITERATIONS,
+                            )
+                        })
+                        .as_ref()
                 {
                     // from the radius fit (the loads move it little), else from the radius
                     // refit's own start (each joint evaluation whitens twice the values)
