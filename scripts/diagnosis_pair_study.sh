@@ -24,9 +24,9 @@ for s in "${seeds[@]}"; do
     dir="$out/$case-$s"
     [ -f "$dir/simulated.csv" ] || target/release/tactile diagnose --simulate "$case" --seed "$s" --out "$dir" --truth-cache "$out/truth" >/dev/null 2>&1
     report=$(target/release/tactile diagnose "$dir/simulated.csv" --reruns 0 --seed "$s" 2>&1)
-    verdict=$(echo "$report" | grep -m1 '^verdict:' | sed 's/^verdict: //')
-    model=$(echo "$report" | grep -m1 '^  final model:' | sed 's/^  final model: //; s/ ([^()]*)//g')
-    e2=$(echo "$report" | grep -m1 'kPa (.*) after, ' | sed 's/^ *E2 = \([0-9.]*\) kPa.*/\1/')
+    verdict=$(echo "$report" | grep -m1 '^verdict:' | sed 's/^verdict: //' || true)
+    model=$(echo "$report" | grep -m1 '^  final model:' | sed 's/^  final model: //; s/ ([^()]*)//g' || true)
+    e2=$(echo "$report" | grep -m1 'kPa (.*) after, ' | sed 's/^ *E2 = \([0-9.]*\) kPa.*/\1/' || true)
     look=$(echo "$report" | grep -m1 '^  look-ahead:' | sed 's/.*: \(kept\|not kept\)$/look-ahead \1/' || true)
     echo "$case seed $s: $verdict | ${model:-nothing added} | E2 ${e2:--} kPa (true 170)${look:+ | $look}"
 done
