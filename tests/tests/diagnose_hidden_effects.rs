@@ -99,7 +99,7 @@ fn camera_radius_offset_is_named_and_the_gap_shrinks() {
 }
 
 #[test]
-#[ignore = "about 13 min in release (converged truths, friction solves); cargo test --release -p system-tests --test diagnose_hidden_effects -- --ignored --nocapture"]
+#[ignore = "about 16 min in release (converged truths, level-1 effect solves); cargo test --release -p system-tests --test diagnose_hidden_effects -- --ignored --nocapture"]
 fn every_effect_at_a_clear_size_is_named_and_the_gap_shrinks() {
     // every effect is checked (a failure is reported, not the end of the run)
     // HIDDEN_EFFECTS=name,name runs only those effects (with their usual seeds)
@@ -188,10 +188,11 @@ fn a_thinner_sample_with_a_displacement_offset_names_both() {
 }
 
 #[test]
-// The camera scale is named first (0.039, absorbing friction's radius signature too); at
-// step 2 friction passes on the radius (a gain of 23 against the step's threshold of 7.4)
-// and on both channels (joint chi2 935 against 7.4) (docs/diagnosis.md, Method, step 7).
-#[ignore = "friction solves, about 70 s in release; cargo test --release -p system-tests --test diagnose_hidden_effects friction_with -- --ignored --nocapture"]
+// Not met: with the truth's friction solved one mesh level finer than the friction table,
+// the camera scale absorbs friction's change of the radius, friction's radius gain at step
+// 2 stays below the gate of its fit to both channels, and the verdict is `unexplained`
+// (docs/diagnosis.md, Method, step 7). The requirement stays: both named.
+#[ignore = "fails: unexplained on the finer-mesh friction truth (docs/diagnosis.md, step 7); about 4 min in release; cargo test --release -p system-tests --test diagnose_hidden_effects friction_with -- --ignored --nocapture"]
 fn friction_with_a_camera_scale_names_both() {
     check_pair(
         Hidden {
