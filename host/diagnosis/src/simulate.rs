@@ -414,11 +414,9 @@ fn cache_file(scenario: &Scenario, dir: &Path) -> Result<(TruthKey, PathBuf), Tr
         path: dir.to_path_buf(),
         reason: e.to_string(),
     })?;
-    // FNV-1a: stable across builds, unlike std's hasher
-    let hash = key_json.bytes().fold(0xcbf2_9ce4_8422_2325_u64, |h, b| {
-        (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
-    });
-    let path = dir.join(format!("truth-{hash:016x}.json"));
+    // the project's table hash (stable across builds, unlike std's hasher), shortened
+    let hash = fem_core::lut::format::sha256_hex(key_json.as_bytes());
+    let path = dir.join(format!("truth-{}.json", &hash[..16]));
     Ok((key, path))
 }
 

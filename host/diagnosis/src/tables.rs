@@ -3,8 +3,8 @@
 //! production mesh (level 0, 0.05 mm steps of tube travel). The diagnosis reads them only as
 //! changes from their base slice (the slice at the axis' base value), added to the converged
 //! baseline ([`converged_baseline`]); the simulated truth adds its physical effects the same
-//! way, from solves one mesh level finer (`simulate::truth_curves`). An effect's change is carried far better than the contact
-//! radius itself: 2.4-3.9 um RMS from converged solves at level 0, against 5-19 um at level -2
+//! way, from solves one mesh level finer (`simulate::truth_curves`). An effect's change is
+//! carried far better than the contact radius itself: 2.4-3.9 um RMS from converged solves at level 0, against 5-19 um at level -2
 //! (`tests/tests/diagnose_effect_deltas.rs`).
 //!
 //! Building them reuses fem-core's builder ([`fem_core::lut::build_lut`]) on the grids of
@@ -17,8 +17,8 @@ use fem_core::CurveParams;
 use fem_core::lut::{EffectSelection, GridIndex, Lut, LutCurve, LutGrid, log_spaced};
 
 /// Mesh level of the effect tables: the production mesh (the simulated truth solves its
-/// effects one level finer, `simulate::TRUTH_EFFECT_MESH_LEVEL`). The band of fine elements at the contact edge
-/// would carry an effect's change to about a micrometre, but costs 5-8 times the time (the
+/// effects one level finer, `simulate::TRUTH_EFFECT_MESH_LEVEL`). The band of fine elements
+/// at the contact edge would carry an effect's change to about a micrometre, but costs 5-8 times the time (the
 /// 650 curves would take hours) and solves no frictional curve.
 pub const EFFECT_MESH_LEVEL: i32 = 0;
 /// Load steps per curve of those tables (to `EFFECT_MAX_DEPTH_MM`): 0.05 mm of travel, the
@@ -38,7 +38,7 @@ pub const BASE_PRESSURES_KPA: [f64; 10] = [4.0, 5.0, 6.0, 7.0, 8.0, 13.0, 14.0, 
 pub const THICKNESS_AXIS_MM: [f64; 4] = [3.5, 4.5, 5.5, 7.0];
 /// Friction coefficients of the friction table (0 is the baseline). Frictional curves cost
 /// 15-100x a frictionless one (linear Newton convergence while slipping), so the friction
-/// table has two values and the moduli 46.4–681 kPa only.
+/// table has two values and the moduli 46.4–464 kPa only.
 pub const FRICTION_AXIS: [f64; 2] = [0.0, 0.4];
 /// Yeoh c2/c1 ratios of the strain-stiffening table (0 is the neo-Hookean baseline). The
 /// Yeoh term grows with the square of the strain, so only soft samples (E2 below ~100 kPa,
@@ -125,7 +125,7 @@ pub fn effect_base_params() -> CurveParams {
 }
 
 /// The grid of the table that varies `axis`: E2 10–1000 kPa (13 log-spaced, the default
-/// table's nodes up to 1000 kPa; friction: 46.4–681 kPa) x p_air 6 and 15 kPa (thickness: [`BASE_PRESSURES_KPA`])
+/// table's nodes up to 1000 kPa; friction: 46.4–464 kPa) x p_air 6 and 15 kPa (thickness: [`BASE_PRESSURES_KPA`])
 /// x the axis values.
 pub fn effect_grid(axis: EffectAxis) -> LutGrid {
     let mut grid = LutGrid::with_axes(
