@@ -332,52 +332,73 @@ pub fn truth_mechanics_cached(
 /// its effects as the same kind of difference (its tables' slices minus their base), so
 /// neither the sample nor its effect shares the diagnosis's mesh.
 pub fn truth_curves(scenario: &Scenario) -> Result<Vec<Curve>, TruthError> {
-    let solve = |params: &CurveParams, edge_band: bool| -> Result<Curve, TruthError> {
-        let simulation = fem_core::Simulation::new(params);
-        let simulation = if edge_band {
-            simulation.with_edge_band()
-        } else {
-            simulation
-        };
+    let solve = |simulation: &fem_core::Simulation| -> Result<Curve, TruthError> {
         Ok(simulation
             .solve()
             .map_err(|source| TruthError::Solve {
-                modulus_kpa: params.sample_modulus_kpa,
-                pressure_kpa: params.pressure_kpa,
+                modulus_kpa: simulation.materials.sample_modulus_kpa,
+                pressure_kpa: simulation.loading.pressure_kpa,
                 source,
             })?
             .curve)
     };
-    let plain_sample = hil_sim::scenario::SampleConfig::default();
     let mut out = Vec::new();
-    for params in hil_sim::mechanics_source::solve_params(scenario) {
-        let plain = CurveParams {
-            sample_thickness_mm: plain_sample.thickness_mm,
-            friction: 0.0,
-            material: plain_sample.law,
-            sample_stiffening: 0.0,
-            ..params.clone()
-        };
-        let sample = solve(&plain, true)?;
-        if plain == params {
-            out.push(sample);
-            continue;
+    for plan in truth_solves(scenario) {
+        let sample = solve(&plan.sample)?;
+        match &plan.effect {
+            None => out.push(sample),
+            Some((with_effect, without)) => {
+                let (with_effect, without) = (solve(with_effect)?, solve(without)?);
+                out.push(with_table_effect(sample, &with_effect, &without, plan.params));
+            }
         }
-        // the two solves one mesh level finer than the effect tables (the truth must not
-        // share the diagnosis's mesh), at the tables' step, to one step short of their last
-        // travel
-        let steps = EFFECT_STEPS - 1;
-        let at_table_settings = |p: &CurveParams| CurveParams {
-            mesh_level: TRUTH_EFFECT_MESH_LEVEL,
-            steps,
-            max_depth_mm: EFFECT_MAX_DEPTH_MM * steps as f64 / EFFECT_STEPS as f64,
-            ..p.clone()
-        };
-        let with_effect = solve(&at_table_settings(&params), false)?;
-        let without = solve(&at_table_settings(&plain), false)?;
-        out.push(with_table_effect(sample, &with_effect, &without, params));
     }
     Ok(out)
+}
+
+/// The solves of one truth curve: the sample's, and for a physical table effect the two
+/// whose difference adds it ([`truth_curves`]).
+struct TruthSolves {
+    params: CurveParams,
+    sample: fem_core::Simulation,
+    effect: Option<(fem_core::Simulation, fem_core::Simulation)>,
+}
+
+/// The solves [`truth_curves`] makes for `scenario`, one per curve.
+fn truth_solves(scenario: &Scenario) -> Vec<TruthSolves> {
+    let plain_sample = hil_sim::scenario::SampleConfig::default();
+    hil_sim::mechanics_source::solve_params(scenario)
+        .into_iter()
+        .map(|params| {
+            let plain = CurveParams {
+                sample_thickness_mm: plain_sample.thickness_mm,
+                friction: 0.0,
+                material: plain_sample.law,
+                sample_stiffening: 0.0,
+                ..params.clone()
+            };
+            let sample = fem_core::Simulation::new(&plain).with_edge_band();
+            // the two solves one mesh level finer than the effect tables (the truth must
+            // not share the diagnosis's mesh), at the tables' step, to one step short of
+            // their last travel
+            let steps = EFFECT_STEPS - 1;
+            let at_table_settings = |p: &CurveParams| {
+                fem_core::Simulation::new(&CurveParams {
+                    mesh_level: TRUTH_EFFECT_MESH_LEVEL,
+                    steps,
+                    max_depth_mm: EFFECT_MAX_DEPTH_MM * steps as f64 / EFFECT_STEPS as f64,
+                    ..p.clone()
+                })
+            };
+            let effect = (plain != params)
+                .then(|| (at_table_settings(&params), at_table_settings(&plain)));
+            TruthSolves {
+                params,
+                sample,
+                effect,
+            }
+        })
+        .collect()
 }
 
 /// What a cached truth is keyed by: every curve's parameters and the settings of its
@@ -388,6 +409,11 @@ struct TruthKey {
     effect_mesh_level: i32,
     effect_steps: usize,
     effect_max_depth_mm: f64,
+    /// Every solve's full settings (mesh, edge band, wall elements, solver tolerances) and
+    /// fem-core's output definitions (the contact-radius estimate): a change of the solver
+    /// settings or of what a curve reports makes the cached truth stale.
+    solves: Vec<String>,
+    outputs: String,
 }
 
 #[derive(serde::Deserialize)]
@@ -409,6 +435,15 @@ fn cache_file(scenario: &Scenario, dir: &Path) -> Result<(TruthKey, PathBuf), Tr
         effect_mesh_level: TRUTH_EFFECT_MESH_LEVEL,
         effect_steps: EFFECT_STEPS,
         effect_max_depth_mm: EFFECT_MAX_DEPTH_MM,
+        solves: truth_solves(scenario)
+            .iter()
+            .flat_map(|plan| {
+                std::iter::once(&plan.sample)
+                    .chain(plan.effect.iter().flat_map(|(a, b)| [a, b]))
+                    .map(|simulation| format!("{simulation:?}"))
+            })
+            .collect(),
+        outputs: fem_core::lut::fem_solver_description(TRUTH_MESH_LEVEL),
     };
     let key_json = serde_json::to_string(&key).map_err(|e| TruthError::Cache {
         path: dir.to_path_buf(),

@@ -36,10 +36,19 @@ pub const EFFECT_PRESSURES_KPA: [f64; 2] = [6.0, 15.0];
 pub const BASE_PRESSURES_KPA: [f64; 10] = [4.0, 5.0, 6.0, 7.0, 8.0, 13.0, 14.0, 15.0, 16.0, 17.0];
 /// Sample thicknesses (mm) of the thickness table; the last is the paper's 7 mm baseline.
 pub const THICKNESS_AXIS_MM: [f64; 4] = [3.5, 4.5, 5.5, 7.0];
-/// Friction coefficients of the friction table (0 is the baseline). Frictional curves cost
-/// 15-100x a frictionless one (linear Newton convergence while slipping), so the friction
-/// table has two values and the moduli 46.4–464 kPa only.
-pub const FRICTION_AXIS: [f64; 2] = [0.0, 0.4];
+/// Friction coefficients of the friction table (0 is the baseline). Friction's change
+/// saturates in mu as the contact sticks: at 166.8 kPa, 15 kPa and u_s 1.2 mm mu 0.2
+/// raises a by 15.6 um and mu 0.4 by 21.1 um, so a chord from 0 to 0.4 misreads the mu in
+/// between (10.6 um for mu 0.2).
+/// Frictional curves cost 15-100x a frictionless one (linear Newton convergence while
+/// slipping), so the table keeps to the moduli 46.4–464 kPa ([`friction_moduli_kpa`]).
+pub const FRICTION_AXIS: [f64; 5] = [0.0, 0.1, 0.2, 0.3, 0.4];
+/// Moduli of the friction table: ten nodes 46.4–464 kPa, 10^(1/9) (x1.29) apart, half the
+/// other tables' spacing there (the header's leave-one-out across E2: 9.4 / 11.6 um at 6 /
+/// 15 kPa, against 19.3 / 17.4 um with seven nodes 10^(1/6) apart).
+pub fn friction_moduli_kpa() -> Vec<f64> {
+    log_spaced(10.0, 1000.0, 19)[6..=15].to_vec()
+}
 /// Yeoh c2/c1 ratios of the strain-stiffening table (0 is the neo-Hookean baseline). The
 /// Yeoh term grows with the square of the strain, so only soft samples (E2 below ~100 kPa,
 /// where the sample takes most of the travel) show it: the axis reaches 20.
@@ -146,7 +155,7 @@ pub fn effect_grid(axis: EffectAxis) -> LutGrid {
         EffectAxis::Friction => {
             grid.base.friction = values[0];
             grid.effects.friction = values;
-            grid.modulus_kpa = grid.modulus_kpa[4..=10].to_vec();
+            grid.modulus_kpa = friction_moduli_kpa();
             grid.base.sample_modulus_kpa = grid.modulus_kpa[0];
         }
         EffectAxis::Stiffening => {
