@@ -658,6 +658,31 @@ mod tests {
         let scenario = truth_scenario(&SimSpec::default());
         let (key, path) = cache_file(&scenario, &dir).expect("key");
         assert_eq!(key.curves.len(), 2, "one truth curve per pressure");
+        // the key holds every solve's settings: a plain sample is one band solve per curve,
+        // a frictional one adds the two finer solves whose difference carries friction
+        assert_eq!(key.solves.len(), 2, "{:?}", key.solves);
+        assert!(key.solves.iter().all(|s| s.contains("edge_band: Some")));
+        let frictional = truth_scenario(&SimSpec {
+            hidden: Some(Hidden {
+                kind: EffectKind::Friction,
+                size: 0.4,
+            }),
+            ..SimSpec::default()
+        });
+        let (frictional_key, frictional_path) = cache_file(&frictional, &dir).expect("key");
+        assert_eq!(frictional_key.solves.len(), 6);
+        let level = format!("mesh_level: {TRUTH_EFFECT_MESH_LEVEL}");
+        assert_eq!(
+            frictional_key
+                .solves
+                .iter()
+                .filter(|s| s.contains(&level) && s.contains("edge_band: None"))
+                .count(),
+            4,
+            "{:?}",
+            frictional_key.solves
+        );
+        assert_ne!(frictional_path, path);
         // a stored truth with this key is returned as stored, without solving
         let stored = vec![curve(10, 0.1, 0.0), curve(10, 0.1, 0.01)];
         let text = serde_json::to_string(&CachedTruthRef {
