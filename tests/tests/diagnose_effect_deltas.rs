@@ -166,7 +166,10 @@ fn the_friction_tables_change_between_its_nodes_agrees_with_finer_solves() {
     );
     let mut failed = Vec::new();
     for p in [6.0, 15.0] {
-        let (plain, effect) = (finer_friction_solve(e, p, 0.0), finer_friction_solve(e, p, mu));
+        let (plain, effect) = (
+            finer_friction_solve(e, p, 0.0),
+            finer_friction_solve(e, p, mu),
+        );
         let (Some((lo0, hi0)), Some((lo1, hi1))) =
             (base.u_s_range_mm(e, p), top.u_s_range_mm(e, p))
         else {

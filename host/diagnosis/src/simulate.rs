@@ -349,7 +349,12 @@ pub fn truth_curves(scenario: &Scenario) -> Result<Vec<Curve>, TruthError> {
             None => out.push(sample),
             Some((with_effect, without)) => {
                 let (with_effect, without) = (solve(with_effect)?, solve(without)?);
-                out.push(with_table_effect(sample, &with_effect, &without, plan.params));
+                out.push(with_table_effect(
+                    sample,
+                    &with_effect,
+                    &without,
+                    plan.params,
+                ));
             }
         }
     }
@@ -390,8 +395,8 @@ fn truth_solves(scenario: &Scenario) -> Vec<TruthSolves> {
                     ..p.clone()
                 })
             };
-            let effect = (plain != params)
-                .then(|| (at_table_settings(&params), at_table_settings(&plain)));
+            let effect =
+                (plain != params).then(|| (at_table_settings(&params), at_table_settings(&plain)));
             TruthSolves {
                 params,
                 sample,
