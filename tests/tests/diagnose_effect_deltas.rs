@@ -14,7 +14,7 @@
 use diagnosis::model::{Channel, Surface};
 use diagnosis::simulate::truth_params;
 use diagnosis::tables::{EffectAxis, read_effect_table, shipped_tables_dir};
-use fem_core::{Curve, CurveParams};
+use fem_core::{Curve, CurveParams, CurvePoint};
 
 fn tables_dir() -> std::path::PathBuf {
     std::env::var("DIAG_TABLES")
@@ -34,8 +34,9 @@ fn converged(e: f64, p: f64, effect: impl Fn(&mut CurveParams)) -> Curve {
         .curve
 }
 
-/// a(u_s) of a curve, linear between its steps (None outside them or before contact).
-fn a_at(c: &Curve, u: f64) -> Option<f64> {
+/// `value`(u_s) of a curve, linear between its steps (None outside them or before
+/// contact).
+fn value_at(c: &Curve, u: f64, value: impl Fn(&CurvePoint) -> f64) -> Option<f64> {
     let pts: Vec<_> = c.points.iter().filter(|q| q.a_mm > 0.0).collect();
     let k = pts.partition_point(|q| q.u_s_mm < u);
     if k == 0 || k == pts.len() {
@@ -43,7 +44,12 @@ fn a_at(c: &Curve, u: f64) -> Option<f64> {
     }
     let (q0, q1) = (pts[k - 1], pts[k]);
     let t = (u - q0.u_s_mm) / (q1.u_s_mm - q0.u_s_mm);
-    Some(q0.a_mm + t * (q1.a_mm - q0.a_mm))
+    Some(value(q0) + t * (value(q1) - value(q0)))
+}
+
+/// a(u_s) of a curve ([`value_at`]).
+fn a_at(c: &Curve, u: f64) -> Option<f64> {
+    value_at(c, u, |q| q.a_mm)
 }
 
 /// RMS of (table change - converged change) (um; printed with the largest) over u_s from 0.2 mm in 0.05 mm
@@ -136,16 +142,9 @@ fn finer_friction_solve(e: f64, p: f64, mu: f64) -> Curve {
         .curve
 }
 
-/// load(u_s) of a curve, linear between its steps (None outside them or before contact).
+/// load(u_s) of a curve ([`value_at`]).
 fn load_at(c: &Curve, u: f64) -> Option<f64> {
-    let pts: Vec<_> = c.points.iter().filter(|q| q.a_mm > 0.0).collect();
-    let k = pts.partition_point(|q| q.u_s_mm < u);
-    if k == 0 || k == pts.len() {
-        return None;
-    }
-    let (q0, q1) = (pts[k - 1], pts[k]);
-    let t = (u - q0.u_s_mm) / (q1.u_s_mm - q0.u_s_mm);
-    Some(q0.load_n + t * (q1.load_n - q0.load_n))
+    value_at(c, u, |q| q.load_n)
 }
 
 #[test]
