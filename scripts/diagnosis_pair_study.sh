@@ -2,7 +2,9 @@
 # Friction with a camera scale through hil-sim's truth (docs/diagnosis.md, Method, step 7):
 # for each seed, simulated data (`tactile diagnose --simulate friction=MU,radius_scale=S`,
 # true E2 170 kPa, 5 replicates at 6 and 15 kPa) diagnosed, one line each: the verdict, the
-# final model's effects and modulus, and whether the forward search's look-ahead decided it.
+# final model's effects and modulus, whether the forward search's look-ahead decided it, and
+# when the radius and the load disagree the candidates that fitted to both channels would
+# explain them (with their fitted parameter).
 #
 #   scripts/diagnosis_pair_study.sh [OUT_DIR] [SEED...]     (default target/pair-study, 41..50)
 #
@@ -28,5 +30,6 @@ for s in "${seeds[@]}"; do
     model=$(echo "$report" | grep -m1 '^  final model:' | sed 's/^  final model: //; s/ ([^()]*)//g' || true)
     e2=$(echo "$report" | grep -m1 'kPa (.*) after, ' | sed 's/^ *E2 = \([0-9.]*\) kPa.*/\1/' || true)
     look=$(echo "$report" | grep -m1 '^  look-ahead:' | sed 's/.*: \(kept\|not kept\)$/look-ahead \1/' || true)
-    echo "$case seed $s: $verdict | ${model:-nothing added} | E2 ${e2:--} kPa (true 170)${look:+ | $look}"
+    both=$(echo "$report" | grep -m1 'explains both within their noise:' | sed 's/.*explains both within their noise: //' | grep -o '[a-z_]* ([a-z_]* = [-0-9.]*' | sed 's/ ([a-z_]* = / /' | paste -sd, - || true)
+    echo "$case seed $s: $verdict | ${model:-nothing added} | E2 ${e2:--} kPa (true 170)${look:+ | $look}${both:+ | both channels: $both}"
 done

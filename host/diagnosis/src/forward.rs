@@ -298,7 +298,100 @@ pub struct ForwardSelection {
     pub final_total_chi2: Option<f64>,
     /// The search also tried from step 1's best radius fit, if it was.
     pub look_ahead: Option<LookAhead>,
+    /// When the radius and the load disagree under the final model: the remaining
+    /// candidates that, added to it and fitted to both channels together, explain both
+    /// within their noise ([`both_channel_candidates`]; not named).
+    pub both_channel_candidates: Vec<BothChannelCandidate>,
 }
+
+/// A candidate that, added to a model under which the radius and the load disagree and
+/// fitted to both channels together, leaves a joint chi^2 within the noise
+/// (p >= [`BOTH_CHANNEL_LEVEL`]).
+#[derive(Debug, Clone, Serialize)]
+pub struct BothChannelCandidate {
+    pub effect: String,
+    pub label: String,
+    /// The candidate's parameters from the fit to both channels.
+    pub parameters: serde_json::Value,
+    pub modulus_kpa: f64,
+    pub joint_chi2: f64,
+    pub values: usize,
+    pub p_value: f64,
+}
+
+/// Level of the joint chi^2 test of [`both_channel_candidates`].
+pub const BOTH_CHANNEL_LEVEL: f64 = 0.01;
+
+/// The candidates of `cands` that combine with `model`'s effects and, fitted with them to
+/// the radius and the load together (`joint`; the modulus, every included parameter and
+/// the candidate's free, from modulus `e0`), leave a joint chi^2 whose p-value on its
+/// degrees of freedom is at least [`BOTH_CHANNEL_LEVEL`]; best first, one variant per
+/// effect. They are reported, not named: the selection detects on the radius, where its
+/// threshold and held-out check are calibrated, and behind a camera scale friction and a
+/// manometer offset both pass this test on the same data (docs/diagnosis.md, step 7).
+pub fn both_channel_candidates(
+    model: &Model<'_>,
+    cands: &[Candidate],
+    points: &[Point],
+    subset: &[usize],
+    joint: &super::joint::JointWhitener,
+    e0: f64,
+) -> Vec<BothChannelCandidate> {
+    let mut out: Vec<BothChannelCandidate> = Vec::new();
+    for c in cands {
+        if model
+            .included
+            .iter()
+            .any(|(inc, _)| inc.kind == c.kind || incompatibility(inc.kind, c.kind).is_some())
+        {
+            continue;
+        }
+        // from no effect and from a small step either way (the joint optimum may lie on
+        // either side, e.g. a manometer reading high or low)
+        let mut best: Option<GlsFit> = None;
+        for t0 in [0.0, 5.0 * c.kind.step(), -5.0 * c.kind.step()] {
+            if let Some(f) = super::fitting::fit_to(
+                model,
+                Some(c),
+                points,
+                subset,
+                super::fitting::Objective::Joint(joint),
+                e0,
+                t0,
+                BOTH_CHANNEL_ITERATIONS,
+            ) && best.as_ref().is_none_or(|b| f.chi2 < b.chi2)
+            {
+                best = Some(f);
+            }
+        }
+        let Some(f) = best else { continue };
+        let dof = f.points.saturating_sub(f.parameters).max(1);
+        let p_value = stats::chi2_sf(f.chi2, dof as f64);
+        if p_value >= BOTH_CHANNEL_LEVEL {
+            out.push(BothChannelCandidate {
+                effect: c.kind.name().into(),
+                label: c.label(),
+                parameters: parameter_map(c, f.theta, f.theta_se),
+                modulus_kpa: f.modulus_kpa,
+                joint_chi2: f.chi2,
+                values: f.points,
+                p_value,
+            });
+        }
+    }
+    out.sort_by(|a, b| a.joint_chi2.total_cmp(&b.joint_chi2));
+    let mut seen: Vec<String> = Vec::new();
+    out.retain(|b| {
+        let first = !seen.contains(&b.effect);
+        seen.push(b.effect.clone());
+        first
+    });
+    out
+}
+
+/// Iterations of each fit of [`both_channel_candidates`] (from no effect, farther than a
+/// joint refit's start at the radius fit, [`selection::JOINT_MAX_ITERATIONS`]).
+const BOTH_CHANNEL_ITERATIONS: usize = 25;
 
 fn gap_of(label: &str, f: &GlsFit, load: Option<(&LoadChannel, f64)>) -> GapSummary {
     let mut g = GapSummary::of(label, f, None);
@@ -693,8 +786,20 @@ fn search(
                     options.seed,
                 )
             });
+    // what the loads would let in behind the final model, when it leaves them unexplained
+    let both_channel_candidates = match (
+        &consistency,
+        &final_model,
+        first.load.as_ref().and_then(|lc| lc.joint.as_ref()),
+    ) {
+        (Some(c), Some((tested, _)), Some(joint)) if !c.agree => {
+            both_channel_candidates(tested, cands, points, subset, joint, modulus_after_kpa)
+        }
+        _ => Vec::new(),
+    };
     let final_model = final_fit.map(|(_, g)| g);
     ForwardSelection {
+        both_channel_candidates,
         consistency,
         gap_shrink: final_model
             .as_ref()

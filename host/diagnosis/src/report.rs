@@ -60,6 +60,7 @@ pub fn text(d: &Diagnosis) -> String {
                 flagged.join("; ")
             }
         );
+        both_channel_text(&mut s, d, &c.model);
     }
     if let Some(c) = d.confidence {
         let _ = writeln!(
@@ -472,6 +473,48 @@ fn p_text(p: f64) -> String {
 }
 
 /// Whether the radius and the load agree under the final model, and where they part.
+/// The candidates that would explain both channels behind the final model
+/// ([`super::forward::both_channel_candidates`]).
+fn both_channel_text(s: &mut String, d: &Diagnosis, model: &str) {
+    let found = &d.forward.both_channel_candidates;
+    if found.is_empty() {
+        return;
+    }
+    let list: Vec<String> = found
+        .iter()
+        .map(|b| {
+            let parameters = b
+                .parameters
+                .as_object()
+                .map(|o| {
+                    o.iter()
+                        .filter_map(|(k, v)| {
+                            let value = v.get("value")?.as_f64()?;
+                            let se = v.get("se")?.as_f64()?;
+                            Some(format!("{k} = {value:.4} +- {se:.4}"))
+                        })
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                })
+                .unwrap_or_default();
+            format!(
+                "{} ({parameters}; E2 {:.1} kPa; joint chi2 {:.1} on {} values, p = {:.2})",
+                b.label, b.modulus_kpa, b.joint_chi2, b.values, b.p_value
+            )
+        })
+        .collect();
+    let _ = writeln!(
+        s,
+        "  fitted to the radius and the load together, {model} + one of these explains both within their noise: {}{}",
+        list.join("; "),
+        if found.len() > 1 {
+            " (none is named: the selection detects on the radius, where its threshold and held-out check are calibrated, and fits to both channels rank such candidates by the tables' own errors in the load; an independent check of each, e.g. the manometer against a reference, decides)"
+        } else {
+            " (not named: the selection detects on the radius, where its threshold and held-out check are calibrated)"
+        }
+    );
+}
+
 fn consistency_text(s: &mut String, d: &Diagnosis) {
     if let Some(c) = &d.forward.consistency {
         let _ = writeln!(

@@ -208,3 +208,69 @@ fn loads_the_baseline_cannot_fit_are_unexplained_when_the_radius_names_nothing()
         "the note names the 15 kPa load windows only: {note}"
     );
 }
+
+/// What the report lists when the radius and the load disagree under the final model
+/// (`forward::both_channel_candidates`): on table data carrying friction behind a camera
+/// scale, with the scale in the model, friction fitted to both channels explains both
+/// within their noise at its true size; with the baseline alone no single candidate does
+/// (the data need both effects), so the list cannot be a list of everything.
+#[test]
+fn friction_behind_a_camera_scale_explains_both_channels_once_the_scale_is_in() {
+    use diagnosis::candidates::{library, predict};
+    use diagnosis::forward::{BOTH_CHANNEL_LEVEL, both_channel_candidates};
+    use diagnosis::load_channel::LoadChannel;
+    use diagnosis::model::Channel;
+    use diagnosis::noise_model::NoiseModel;
+    let (base, effects) = shipped_tables().expect("shipped tables");
+    let model = Model::new(&base, &effects).expect("model");
+    let (mu, scale) = (0.3, 0.03);
+    let pts = synthetic(
+        &model,
+        &[(EffectKind::Friction, mu), (EffectKind::RadiusScale, scale)],
+        26,
+    );
+    let subset: Vec<usize> = (0..pts.len()).collect();
+    let e = TRUE_MODULUS_KPA;
+    let found_under = |m: &Model<'_>| {
+        let r: Vec<f64> = pts
+            .iter()
+            .map(|p| p.a_mm - predict(m, None, e, 0.0, p, Channel::Radius))
+            .collect();
+        let noise = NoiseModel::estimate(m, &pts, &r, e);
+        let lc = LoadChannel::new(m, &pts, &subset, e)
+            .expect("a load channel")
+            .with_joint(m, &noise, &pts, &subset, e);
+        let joint = lc.joint.expect("a joint whitening");
+        both_channel_candidates(m, &library(&model), &pts, &subset, &joint, e)
+    };
+    let mut with_scale = model.clone();
+    with_scale.included = vec![(candidate(EffectKind::RadiusScale), scale)];
+    let found = found_under(&with_scale);
+    eprintln!("{found:#?}");
+    assert!(found.iter().all(|b| b.p_value >= BOTH_CHANNEL_LEVEL));
+    assert!(
+        found.windows(2).all(|w| w[0].joint_chi2 <= w[1].joint_chi2),
+        "best first"
+    );
+    let friction = found
+        .iter()
+        .find(|b| b.effect == "friction")
+        .expect("friction explains both channels");
+    let fitted = friction.parameters["friction_coefficient"]["value"]
+        .as_f64()
+        .expect("a fitted mu");
+    // the table is the truth here: only the noise moves the fit (se about 0.01)
+    assert!((fitted - mu).abs() < 0.05, "mu {fitted}");
+    assert!(
+        (friction.modulus_kpa / e - 1.0).abs() < 0.02,
+        "{friction:?}"
+    );
+    // neither effect alone explains both channels
+    let alone = found_under(&model);
+    assert!(
+        alone
+            .iter()
+            .all(|b| b.effect != "friction" && b.effect != "radius_scale"),
+        "{alone:#?}"
+    );
+}
