@@ -469,7 +469,7 @@ pub fn diagnose(
     // 6. forward selection: what remains once the named effect is in the model; then
     // whether the radius and the load agree under its final model (consistency.rs): when
     // they do not, the library's effects do not explain the data, whatever they improved
-    let forward = forward::run(
+    let mut forward = forward::run(
         &model, &cands, &points, &subset, &noise, &whitener, options, &first,
     );
     // the search from step 1's best radius fit names the first effect when it is the one
@@ -491,6 +491,18 @@ pub fn diagnose(
         .map(|lc| lc.baseline_chi2 / lc.whitener.len().max(1) as f64);
     let load_unfitted = decision.verdict == Verdict::None
         && load_lack_of_fit.is_some_and(|v| v > LOAD_LACK_OF_FIT_LIMIT);
+    // what fitted to both channels would explain the loads the baseline leaves (listed, not
+    // named, as behind a model whose channels disagree: forward.rs)
+    if load_unfitted && let Some(joint) = load.as_ref().and_then(|lc| lc.joint.as_ref()) {
+        forward.both_channel_candidates = forward::both_channel_candidates(
+            &model,
+            &cands,
+            &points,
+            &subset,
+            joint,
+            first.base.modulus_kpa,
+        );
+    }
     let verdict = if outside_library || load_unfitted {
         Verdict::Unexplained
     } else {

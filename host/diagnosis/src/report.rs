@@ -61,6 +61,9 @@ pub fn text(d: &Diagnosis) -> String {
             }
         );
         both_channel_text(&mut s, d, &c.model);
+    } else if d.verdict == super::Verdict::Unexplained {
+        // nothing named, the loads unexplained by the baseline (lib.rs)
+        both_channel_text(&mut s, d, "the baseline");
     }
     if let Some(c) = d.confidence {
         let _ = writeln!(
