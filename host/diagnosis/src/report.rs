@@ -475,7 +475,6 @@ fn p_text(p: f64) -> String {
     }
 }
 
-/// Whether the radius and the load agree under the final model, and where they part.
 /// The candidates that would explain both channels behind the final model
 /// ([`super::forward::both_channel_candidates`]).
 fn both_channel_text(s: &mut String, d: &Diagnosis, model: &str) {
@@ -518,6 +517,7 @@ fn both_channel_text(s: &mut String, d: &Diagnosis, model: &str) {
     );
 }
 
+/// Whether the radius and the load agree under the final model, and where they part.
 fn consistency_text(s: &mut String, d: &Diagnosis) {
     if let Some(c) = &d.forward.consistency {
         let _ = writeln!(
