@@ -4,7 +4,8 @@
 # true E2 170 kPa, 5 replicates at 6 and 15 kPa) diagnosed, one line each: the verdict, the
 # final model's effects and modulus, whether the forward search's look-ahead decided it, and
 # when the radius and the load disagree the candidates that fitted to both channels would
-# explain them (with their fitted parameter).
+# explain them (with their fitted parameter, their joint chi^2 and the tube travel's chi^2
+# and p-value under them).
 #
 #   scripts/diagnosis_pair_study.sh [OUT_DIR] [SEED...]     (default target/pair-study, 41..50)
 #
@@ -30,6 +31,6 @@ for s in "${seeds[@]}"; do
     model=$(echo "$report" | grep -m1 '^  final model:' | sed 's/^  final model: //; s/ ([^()]*)//g' || true)
     e2=$(echo "$report" | grep -m1 'kPa (.*) after, ' | sed 's/^ *E2 = \([0-9.]*\) kPa.*/\1/' || true)
     look=$(echo "$report" | grep -m1 '^  look-ahead:' | sed 's/.*: \(kept\|not kept\)$/look-ahead \1/' || true)
-    both=$(echo "$report" | grep -m1 'explains both within their noise:' | sed 's/.*explains both within their noise: //; s/); /)\n/g' | sed -E 's/^(.*) \(([a-z_]+) = ([-0-9.]+).* joint chi2 ([0-9.]+) .*/\1 \3 (chi2 \4)/' | paste -sd, - | sed 's/,/, /g' || true)
+    both=$(echo "$report" | grep -m1 'explains both within their noise:' | sed 's/.*explains both within their noise: //; s/); /)\n/g' | sed -E 's/^(.*) \(([a-z_]+) = ([-0-9.]+).* joint chi2 ([0-9.]+) on [0-9]+ values, p = [0-9.]+(; tube travel under it: chi2 ([0-9.]+) on [0-9]+ values, p ([=<]) ([0-9.]+))?.*/\1 \3 (chi2 \4; travel chi2 \6 (p \7 \8))/; s/; travel chi2  \(p  \)\)/)/' | paste -sd, - | sed 's/,/, /g' || true)
     echo "$case seed $s: $verdict | ${model:-nothing added} | E2 ${e2:--} kPa (true 170)${look:+ | $look}${both:+ | both channels: $both}"
 done

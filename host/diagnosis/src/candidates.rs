@@ -308,7 +308,7 @@ pub fn predict_with(
     let v = predict_single(model, c, e, t, &q, channel);
     match channel {
         Channel::Radius => v * (1.0 + s) + a0,
-        Channel::Load => v,
+        Channel::Load | Channel::Travel => v,
     }
 }
 
@@ -352,7 +352,7 @@ fn predict_single(
                     }
                     match channel {
                         Channel::Radius => a,
-                        Channel::Load => base_at(e * f, p, u),
+                        Channel::Load | Channel::Travel => base_at(e * f, p, u),
                     }
                 }
             }
@@ -371,15 +371,16 @@ fn predict_single(
             match channel {
                 Channel::Radius => s.a_mm * jkr_factor(theta, s.load_n),
                 Channel::Load => s.load_n,
+                Channel::Travel => s.h_mm,
             }
         }
         EffectKind::RadiusOffset => match channel {
             Channel::Radius => base_at(e, p, u) + theta,
-            Channel::Load => base_at(e, p, u),
+            Channel::Load | Channel::Travel => base_at(e, p, u),
         },
         EffectKind::RadiusScale => match channel {
             Channel::Radius => base_at(e, p, u) * (1.0 + theta),
-            Channel::Load => base_at(e, p, u),
+            Channel::Load | Channel::Travel => base_at(e, p, u),
         },
         EffectKind::DisplacementOffset => base_at(e, p, u - theta),
         EffectKind::PressureOffset => base_at(e, p - theta, u),

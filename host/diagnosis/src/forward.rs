@@ -317,6 +317,10 @@ pub struct BothChannelCandidate {
     pub joint_chi2: f64,
     pub values: usize,
     pub p_value: f64,
+    /// The tube travel under the fitted model ([`super::travel::check`]), where the data
+    /// record it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub travel: Option<super::travel::TravelCheck>,
 }
 
 /// Level of the joint chi^2 test of [`both_channel_candidates`].
@@ -368,6 +372,15 @@ pub fn both_channel_candidates(
         let dof = f.points.saturating_sub(f.parameters).max(1);
         let p_value = stats::chi2_sf(f.chi2, dof as f64);
         if p_value >= BOTH_CHANNEL_LEVEL {
+            let travel = super::travel::check(
+                model,
+                &f.included,
+                Some(c),
+                f.modulus_kpa,
+                f.theta,
+                points,
+                subset,
+            );
             out.push(BothChannelCandidate {
                 effect: c.kind.name().into(),
                 label: c.label(),
@@ -376,6 +389,7 @@ pub fn both_channel_candidates(
                 joint_chi2: f.chi2,
                 values: f.points,
                 p_value,
+                travel,
             });
         }
     }

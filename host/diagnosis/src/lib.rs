@@ -38,6 +38,7 @@ pub mod signatures;
 pub mod simulate;
 pub mod stats;
 pub mod tables;
+pub mod travel;
 pub mod verdict;
 
 use std::time::Instant;

@@ -15,12 +15,14 @@ pub struct ModelSample {
     pub h_mm: f64,
 }
 
-/// A measured channel against u_s: the contact radius (a–u_s, mm) or the load (P–u_s, N).
+/// A measured channel against u_s: the contact radius (a–u_s, mm), the load (P–u_s, N) or
+/// the tube travel (h–u_s, mm: the stage's position, which no sensor of the probe measures).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Channel {
     Radius,
     Load,
+    Travel,
 }
 
 impl Channel {
@@ -29,14 +31,16 @@ impl Channel {
         match self {
             Self::Radius => s.a_mm,
             Self::Load => s.load_n,
+            Self::Travel => s.h_mm,
         }
     }
 
-    /// The channel's measured value at a point (NaN where the point has no load).
+    /// The channel's measured value at a point (NaN where the point has no load or travel).
     pub fn measured(self, p: &super::data::Point) -> f64 {
         match self {
             Self::Radius => p.a_mm,
             Self::Load => p.load_n.unwrap_or(f64::NAN),
+            Self::Travel => p.h_mm.unwrap_or(f64::NAN),
         }
     }
 }
@@ -389,6 +393,7 @@ impl<'a> Model<'a> {
                 as_.push(match channel {
                     Channel::Radius => c.a_mm[k],
                     Channel::Load => c.load_n[k],
+                    Channel::Travel => c.h_mm[k],
                 });
             }
         }

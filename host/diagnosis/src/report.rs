@@ -499,8 +499,16 @@ fn both_channel_text(s: &mut String, d: &Diagnosis, model: &str) {
                         .join(", ")
                 })
                 .unwrap_or_default();
+            let travel = b.travel.map_or(String::new(), |t| {
+                format!(
+                    "; tube travel under it: chi2 {:.1} on {} values, p {}",
+                    t.chi2,
+                    t.values,
+                    p_text(t.p_value)
+                )
+            });
             format!(
-                "{} ({parameters}; E2 {:.1} kPa; joint chi2 {:.1} on {} values, p = {:.2})",
+                "{} ({parameters}; E2 {:.1} kPa; joint chi2 {:.1} on {} values, p = {:.2}{travel})",
                 b.label, b.modulus_kpa, b.joint_chi2, b.values, b.p_value
             )
         })
@@ -510,7 +518,7 @@ fn both_channel_text(s: &mut String, d: &Diagnosis, model: &str) {
         "  fitted to the radius and the load together, {model} + one of these explains both within their noise: {}{}",
         list.join("; "),
         if found.len() > 1 {
-            " (none is named: the selection detects on the radius, where its threshold and held-out check are calibrated, and fits to both channels rank such candidates by the tables' own errors in the load; an independent check of each, e.g. the manometer against a reference, decides)"
+            " (none is named: the selection detects on the radius, where its threshold and held-out check are calibrated, and fits to both channels rank such candidates by the tables' own errors in the load; an independent check of each, e.g. the manometer against a reference, decides; the tube travel, where the data record it, is one: a candidate whose travel is off at p < 0.01 is unlikely)"
         } else {
             " (not named: the selection detects on the radius, where its threshold and held-out check are calibrated)"
         }

@@ -49,7 +49,8 @@ impl Default for SyntheticSpec {
 }
 
 /// Points of `truth` (a candidate at its parameter, or the baseline) plus `extra(u_s)` on a,
-/// with the spec's noise; sorted as the diagnosis expects.
+/// with the spec's noise (none on the tube travel h, which shares only the u_s reading's);
+/// sorted as the diagnosis expects.
 pub fn generate(
     model: &Model<'_>,
     truth: Option<(&Candidate, f64)>,
@@ -84,6 +85,8 @@ pub fn generate(
                 let e = spec.modulus_kpa;
                 let a = predict(model, cand, e, theta, &pt, Channel::Radius);
                 let load = predict(model, cand, e, theta, &pt, Channel::Load);
+                // the stage's travel is where it was driven: exact, at the true u_s
+                pt.h_mm = Some(predict(model, cand, e, theta, &pt, Channel::Travel));
                 pt.a_mm = a + extra(pt.u_s_mm) + off_a + spec.white_a_mm * g.normal();
                 pt.load_n = Some(load + off_load + spec.white_load_n * g.normal());
                 if spec.white_u_mm > 0.0 || spec.offset_u_mm > 0.0 {

@@ -1,0 +1,91 @@
+//! The tube-travel check (`diagnosis::travel`) on data generated from the shipped tables with
+//! a noisy u_s reading (the stage's travel exact, as on the bench): the true model's travel
+//! passes, and one that explains the radius and the load about as well but moves the shell
+//! otherwise (a manometer offset in place of friction) does not.
+//!
+//! Truth: E2 = 170 kPa, friction mu 0.4 behind a 3 % camera scale, 5 replicates at 6 and
+//! 15 kPa, 40 points each over u_s 0.15..1.15 mm; u_s read with 3 um white noise and 2 um
+//! per-test offsets (the proximity sensor's order of noise after calibration), a and the
+//! load with testkit's defaults.
+
+use diagnosis::candidates::{Candidate, EffectKind, library, predict};
+use diagnosis::forward::both_channel_candidates;
+use diagnosis::load_channel::LoadChannel;
+use diagnosis::model::{Channel, Model};
+use diagnosis::noise_model::NoiseModel;
+use diagnosis::tables::shipped_tables;
+use diagnosis::travel::{MIN_TRAVEL_POINTS, check};
+use testkit::synthetic_curves::{SyntheticSpec, generate};
+
+fn candidate(kind: EffectKind) -> Candidate {
+    Candidate {
+        kind,
+        tau_h_mm: None,
+    }
+}
+
+#[test]
+fn the_travel_accepts_the_true_model_and_rejects_a_manometer_offset_in_place_of_friction() {
+    let (base, effects) = shipped_tables().expect("shipped tables");
+    let model = Model::new(&base, &effects).expect("model");
+    let (mu, scale) = (0.4, 0.03);
+    let mut truth = model.clone();
+    truth.included = vec![
+        (candidate(EffectKind::Friction), mu),
+        (candidate(EffectKind::RadiusScale), scale),
+    ];
+    let spec = SyntheticSpec {
+        white_u_mm: 0.003,
+        offset_u_mm: 0.002,
+        seed: 5,
+        ..SyntheticSpec::default()
+    };
+    let e = spec.modulus_kpa;
+    let pts = generate(&truth, None, |_| 0.0, &spec);
+    let subset: Vec<usize> = (0..pts.len()).collect();
+    // the true model's chi^2 is a draw of its distribution: p < 0.01 would be a 1 % event
+    let true_check = check(&truth, &[mu, scale], None, e, 0.0, &pts, &subset).expect("a check");
+    eprintln!("true model: {true_check:?}");
+    assert_eq!(true_check.values, pts.len());
+    assert!(true_check.p_value >= 0.01, "{true_check:?}");
+    // the candidates fitted to the radius and the load behind the scale, each with its
+    // travel
+    let mut with_scale = model.clone();
+    with_scale.included = vec![(candidate(EffectKind::RadiusScale), scale)];
+    let r: Vec<f64> = pts
+        .iter()
+        .map(|p| p.a_mm - predict(&with_scale, None, e, 0.0, p, Channel::Radius))
+        .collect();
+    let noise = NoiseModel::estimate(&with_scale, &pts, &r, e);
+    let joint = LoadChannel::new(&with_scale, &pts, &subset, e)
+        .expect("a load channel")
+        .with_joint(&with_scale, &noise, &pts, &subset, e)
+        .joint
+        .expect("a joint whitening");
+    let found = both_channel_candidates(&with_scale, &library(&model), &pts, &subset, &joint, e);
+    for b in &found {
+        eprintln!(
+            "{} {:.1} kPa: joint chi2 {:.1}, travel {:?}",
+            b.label, b.modulus_kpa, b.joint_chi2, b.travel
+        );
+    }
+    let travel_of = |effect: &str| {
+        found
+            .iter()
+            .find(|b| b.effect == effect)
+            .and_then(|b| b.travel)
+            .expect("a listed candidate with its travel")
+    };
+    let friction = travel_of("friction");
+    assert!(friction.p_value >= 0.01, "{friction:?}");
+    let offset = travel_of("pressure_offset");
+    assert!(offset.p_value < 0.01, "{offset:?}");
+    // without a recorded travel, or with too few points, there is nothing to check
+    let no_travel: Vec<_> = pts
+        .iter()
+        .map(|p| diagnosis::data::Point { h_mm: None, ..*p })
+        .collect();
+    assert!(check(&truth, &[mu, scale], None, e, 0.0, &no_travel, &subset).is_none());
+    let few: Vec<usize> = (0..MIN_TRAVEL_POINTS - 1).collect();
+    assert!(check(&truth, &[mu, scale], None, e, 0.0, &pts, &few).is_none());
+}
