@@ -44,6 +44,10 @@ pub struct GlsFit {
     pub residuals_mm: Vec<f64>,
     #[serde(skip)]
     pub whitened: Vec<f64>,
+    /// Covariance of the fitted parameters, row-major, in the order ln E2, the
+    /// candidate's parameter (when the fit has a candidate), the included effects'.
+    #[serde(skip)]
+    pub covariance: Vec<f64>,
     pub iterations: usize,
 }
 
@@ -271,6 +275,7 @@ pub fn fit_to(
         theta_se,
         included: q[1 + c_off..].to_vec(),
         included_se: (1 + c_off..k).map(se).collect(),
+        covariance: cov.iter().map(|c| c * scale).collect(),
         chi2: s,
         points: n,
         parameters: k,

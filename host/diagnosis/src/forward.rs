@@ -298,6 +298,9 @@ pub struct ForwardSelection {
     pub final_total_chi2: Option<f64>,
     /// The search also tried from step 1's best radius fit, if it was.
     pub look_ahead: Option<LookAhead>,
+    /// The tube travel under the final model (the baseline when nothing was added), where
+    /// the data record it ([`super::travel::check`]).
+    pub travel: Option<super::travel::TravelCheck>,
     /// When the radius and the load disagree under the final model: the remaining
     /// candidates that, added to it and fitted to both channels together, explain both
     /// within their noise ([`both_channel_candidates`]; not named).
@@ -378,6 +381,7 @@ pub fn both_channel_candidates(
                 Some(c),
                 f.modulus_kpa,
                 f.theta,
+                &super::travel::FittedCovariance::of(&f, true, None),
                 points,
                 subset,
             );
@@ -811,8 +815,39 @@ fn search(
         }
         _ => Vec::new(),
     };
+    // the final fit's modulus and parameters with their covariance: the last step's fit of
+    // its new effect on the model before it (its included effects, then the new one), or
+    // the baseline's
+    let travel = match (&final_model, &final_fit) {
+        (Some((tested, _)), Some((f, _))) => {
+            let included: Vec<f64> = tested.included.iter().map(|(_, t)| *t).collect();
+            let cov = super::travel::FittedCovariance::of(f, true, Some(included.len() - 1));
+            super::travel::check(
+                tested,
+                &included,
+                None,
+                modulus_after_kpa,
+                0.0,
+                &cov,
+                points,
+                subset,
+            )
+        }
+        (None, _) => super::travel::check(
+            model,
+            &[],
+            None,
+            modulus_after_kpa,
+            0.0,
+            &super::travel::FittedCovariance::of(&first.base, false, None),
+            points,
+            subset,
+        ),
+        _ => None,
+    };
     let final_model = final_fit.map(|(_, g)| g);
     ForwardSelection {
+        travel,
         both_channel_candidates,
         consistency,
         gap_shrink: final_model

@@ -306,6 +306,7 @@ pub fn text(d: &Diagnosis) -> String {
     }
     forward_text(&mut s, d);
     consistency_text(&mut s, d);
+    travel_text(&mut s, d);
     let _ = writeln!(
         s,
         "\n{} points used, {} outside the table's u_s range or below {} mm of u_s; {:.2} s",
@@ -523,6 +524,31 @@ fn both_channel_text(s: &mut String, d: &Diagnosis, model: &str) {
             " (not named: the selection detects on the radius, where its threshold and held-out check are calibrated)"
         }
     );
+}
+
+/// The tube travel under the final model ([`super::travel::check`]), where the data record
+/// it.
+fn travel_text(s: &mut String, d: &Diagnosis) {
+    if let Some(t) = &d.forward.travel {
+        let model = d
+            .forward
+            .consistency
+            .as_ref()
+            .map_or("the final model", |c| c.model.as_str());
+        let model = if d.forward.final_model.is_some() {
+            model
+        } else {
+            "the baseline"
+        };
+        let _ = writeln!(
+            s,
+            "  tube travel under {model} (h against u_s, which neither the camera nor the load cell sees): chi2 {:.1} on {} values, RMS {:.4} mm, p {}",
+            t.chi2,
+            t.values,
+            t.rms_residual_mm,
+            p_text(t.p_value)
+        );
+    }
 }
 
 /// Whether the radius and the load agree under the final model, and where they part.

@@ -10,15 +10,23 @@
 //!
 //! The residuals r = h - h_model(u_s) of a fitted model get the noise model of the other
 //! channels ([`NoiseModel::estimate_channel`], estimated from the replicates: the u_s
-//! errors enter through dh/du_s, the table's interpolation across E2 as its own term), and
-//! their chi^2 over the whitened values is tested on as many degrees of freedom (the
-//! parameters were fitted to the other channels). The travel shares the u_s errors with
-//! the radius and the load; the test reads it on its own, not jointly with them.
+//! errors enter through dh/du_s, the table's interpolation across E2 as its own term),
+//! plus the uncertainty of the parameters fitted to the other channels, each a term
+//! common to every point, s_k s_k^T sigma_k^2 with s_k = dh/dtheta_k (the modulus in
+//! ln E2 and each effect's parameter; their correlation is left out). With w = L^-1 r and
+//! V = L^-1 [s_k sigma_k] (L the noise model's Cholesky factor), Woodbury gives
+//!
+//! chi^2 = |w|^2 - w^T V (I + V^T V)^-1 V^T w,
+//!
+//! tested on as many degrees of freedom as values (no parameter is fitted to the travel).
+//! The travel shares the u_s errors with the radius and the load; the test reads it on its
+//! own, not jointly with them.
 
 use serde::Serialize;
 
 use super::candidates::{Candidate, predict_with};
 use super::data::Point;
+use super::linalg;
 use super::model::{Channel, Model};
 use super::noise_model::NoiseModel;
 use super::stats;
@@ -36,15 +44,57 @@ pub struct TravelCheck {
     pub rms_residual_mm: f64,
 }
 
+/// A fitted parameter of the model whose travel is checked.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Parameter {
+    LnModulus,
+    /// The candidate's parameter.
+    Theta,
+    /// The included effect `j`'s (in the order of [`Model::included`]).
+    Included(usize),
+}
+
+/// The covariance of the fitted parameters (row-major, [`crate::fitting::GlsFit::covariance`])
+/// and which parameter each row is.
+#[derive(Debug, Clone, Default)]
+pub struct FittedCovariance {
+    pub order: Vec<Parameter>,
+    pub matrix: Vec<f64>,
+}
+
+impl FittedCovariance {
+    /// The covariance of `fit`, a fit with a candidate (`with_theta`) or without, of a model
+    /// with `included` effects; `theta_as` renames the candidate's parameter (an effect the
+    /// checked model includes).
+    pub fn of(fit: &crate::fitting::GlsFit, with_theta: bool, theta_as: Option<usize>) -> Self {
+        let mut order = vec![Parameter::LnModulus];
+        if with_theta {
+            order.push(theta_as.map_or(Parameter::Theta, Parameter::Included));
+        }
+        order.extend((0..fit.included.len()).map(Parameter::Included));
+        let k = order.len();
+        if fit.covariance.len() != k * k {
+            return Self::default();
+        }
+        Self {
+            order,
+            matrix: fit.covariance.clone(),
+        }
+    }
+}
+
 /// The travel check of `model` with its included effects at `included` and `cand` at
-/// `theta`, modulus `e`, over the points of `subset` that record a travel; `None` with fewer
-/// than [`MIN_TRAVEL_POINTS`] of them or a noise model that cannot be whitened.
+/// `theta`, modulus `e` (the fitted parameters' covariance `cov`), over the points of
+/// `subset` that record a travel; `None` with fewer than [`MIN_TRAVEL_POINTS`] of them or
+/// a noise model that cannot be whitened.
+#[allow(clippy::too_many_arguments)] // the fitted model's parts, as the fits hand them over
 pub fn check(
     model: &Model<'_>,
     included: &[f64],
     cand: Option<&Candidate>,
     e: f64,
     theta: f64,
+    cov: &FittedCovariance,
     points: &[Point],
     subset: &[usize],
 ) -> Option<TravelCheck> {
@@ -56,20 +106,96 @@ pub fn check(
     if with_travel.len() < MIN_TRAVEL_POINTS {
         return None;
     }
+    let h_of = |included: &[f64], e: f64, theta: f64, p: &Point| {
+        predict_with(model, included, cand, e, theta, p, Channel::Travel)
+    };
     let r: Vec<f64> = with_travel
         .iter()
-        .map(|p| {
-            Channel::Travel.measured(p)
-                - predict_with(model, included, cand, e, theta, p, Channel::Travel)
-        })
+        .map(|p| Channel::Travel.measured(p) - h_of(included, e, theta, p))
         .collect();
     if r.iter().any(|x| !x.is_finite()) {
+        return None;
+    }
+    // each fitted parameter's sensitivity dh/dq (central differences)
+    let sensitivity = |q: Parameter| -> Vec<f64> {
+        match q {
+            Parameter::LnModulus => {
+                let d: f64 = 0.01;
+                with_travel
+                    .iter()
+                    .map(|p| {
+                        (h_of(included, e * d.exp(), theta, p)
+                            - h_of(included, e * (-d).exp(), theta, p))
+                            / (2.0 * d)
+                    })
+                    .collect()
+            }
+            Parameter::Theta => match cand {
+                Some(c) => {
+                    let d = c.kind.step();
+                    with_travel
+                        .iter()
+                        .map(|p| {
+                            (h_of(included, e, theta + d, p) - h_of(included, e, theta - d, p))
+                                / (2.0 * d)
+                        })
+                        .collect()
+                }
+                None => vec![0.0; with_travel.len()],
+            },
+            Parameter::Included(j) => match model.included.get(j) {
+                Some((c, _)) if j < included.len() => {
+                    let d = c.kind.step();
+                    let (mut lo, mut hi) = (included.to_vec(), included.to_vec());
+                    lo[j] -= d;
+                    hi[j] += d;
+                    with_travel
+                        .iter()
+                        .map(|p| (h_of(&hi, e, theta, p) - h_of(&lo, e, theta, p)) / (2.0 * d))
+                        .collect()
+                }
+                _ => vec![0.0; with_travel.len()],
+            },
+        }
+    };
+    // S L_c: the parameters' covariance S C S^T as a low-rank term
+    let k = cov.order.len();
+    let mut columns: Vec<Vec<f64>> = Vec::new();
+    if k > 0
+        && cov.matrix.len() == k * k
+        && let Some(lc) = linalg::cholesky(&cov.matrix, k)
+    {
+        let s: Vec<Vec<f64>> = cov.order.iter().map(|&q| sensitivity(q)).collect();
+        for b in 0..k {
+            columns.push(
+                (0..with_travel.len())
+                    .map(|i| (b..k).map(|a| s[a][i] * lc[a * k + b]).sum())
+                    .collect(),
+            );
+        }
+    }
+    if columns.iter().flatten().any(|x| !x.is_finite()) {
         return None;
     }
     let noise = NoiseModel::estimate_channel(model, Channel::Travel, &with_travel, &r, e);
     let all: Vec<usize> = (0..with_travel.len()).collect();
     let whitener = noise.whitener(&with_travel, &all)?;
-    let chi2: f64 = whitener.whiten(&r).iter().map(|z| z * z).sum();
+    let w = whitener.whiten(&r);
+    let v: Vec<Vec<f64>> = columns.iter().map(|c| whitener.whiten(c)).collect();
+    let mut chi2: f64 = linalg::dot(&w, &w);
+    let k = v.len();
+    if k > 0 {
+        // Woodbury: subtract w^T V (I + V^T V)^-1 V^T w
+        let mut gram = vec![0.0; k * k];
+        for a in 0..k {
+            for b in 0..k {
+                gram[a * k + b] = linalg::dot(&v[a], &v[b]) + if a == b { 1.0 } else { 0.0 };
+            }
+        }
+        let vw: Vec<f64> = v.iter().map(|va| linalg::dot(va, &w)).collect();
+        let y = linalg::solve_spd(&gram, k, &vw)?;
+        chi2 -= linalg::dot(&vw, &y);
+    }
     let values = whitener.len();
     Some(TravelCheck {
         chi2,
