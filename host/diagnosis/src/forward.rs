@@ -377,11 +377,13 @@ pub fn both_channel_candidates(
         if p_value >= BOTH_CHANNEL_LEVEL {
             let travel = super::travel::check(
                 model,
-                &f.included,
-                Some(c),
-                f.modulus_kpa,
-                f.theta,
-                &super::travel::FittedCovariance::of(&f, true, None),
+                &super::travel::FittedModel {
+                    included: &f.included,
+                    cand: Some(c),
+                    theta: f.theta,
+                    modulus_kpa: f.modulus_kpa,
+                    covariance: &super::travel::FittedCovariance::of(&f, true, None),
+                },
                 points,
                 subset,
             );
@@ -824,22 +826,26 @@ fn search(
             let cov = super::travel::FittedCovariance::of(f, true, Some(included.len() - 1));
             super::travel::check(
                 tested,
-                &included,
-                None,
-                modulus_after_kpa,
-                0.0,
-                &cov,
+                &super::travel::FittedModel {
+                    included: &included,
+                    cand: None,
+                    theta: 0.0,
+                    modulus_kpa: modulus_after_kpa,
+                    covariance: &cov,
+                },
                 points,
                 subset,
             )
         }
         (None, _) => super::travel::check(
             model,
-            &[],
-            None,
-            modulus_after_kpa,
-            0.0,
-            &super::travel::FittedCovariance::of(&first.base, false, None),
+            &super::travel::FittedModel {
+                included: &[],
+                cand: None,
+                theta: 0.0,
+                modulus_kpa: modulus_after_kpa,
+                covariance: &super::travel::FittedCovariance::of(&first.base, false, None),
+            },
             points,
             subset,
         ),

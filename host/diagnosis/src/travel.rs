@@ -83,21 +83,34 @@ impl FittedCovariance {
     }
 }
 
-/// The travel check of `model` with its included effects at `included` and `cand` at
-/// `theta`, modulus `e` (the fitted parameters' covariance `cov`), over the points of
+/// A model fitted to the other channels, as the travel check reads it.
+#[derive(Debug, Clone, Copy)]
+pub struct FittedModel<'a> {
+    /// The included effects' parameters (in the order of [`Model::included`]).
+    pub included: &'a [f64],
+    /// A candidate on top of them, with its parameter `theta`.
+    pub cand: Option<&'a Candidate>,
+    pub theta: f64,
+    pub modulus_kpa: f64,
+    pub covariance: &'a FittedCovariance,
+}
+
+/// The travel check of `model` at the fitted parameters `fitted`, over the points of
 /// `subset` that record a travel; `None` with fewer than [`MIN_TRAVEL_POINTS`] of them or
 /// a noise model that cannot be whitened.
-#[allow(clippy::too_many_arguments)] // the fitted model's parts, as the fits hand them over
 pub fn check(
     model: &Model<'_>,
-    included: &[f64],
-    cand: Option<&Candidate>,
-    e: f64,
-    theta: f64,
-    cov: &FittedCovariance,
+    fitted: &FittedModel<'_>,
     points: &[Point],
     subset: &[usize],
 ) -> Option<TravelCheck> {
+    let FittedModel {
+        included,
+        cand,
+        theta,
+        modulus_kpa: e,
+        covariance: cov,
+    } = *fitted;
     let with_travel: Vec<Point> = subset
         .iter()
         .map(|&i| points[i])

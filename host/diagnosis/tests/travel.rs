@@ -14,7 +14,7 @@ use diagnosis::load_channel::LoadChannel;
 use diagnosis::model::{Channel, Model};
 use diagnosis::noise_model::NoiseModel;
 use diagnosis::tables::shipped_tables;
-use diagnosis::travel::{FittedCovariance, MIN_TRAVEL_POINTS, check};
+use diagnosis::travel::{FittedCovariance, FittedModel, MIN_TRAVEL_POINTS, check};
 use testkit::synthetic_curves::{SyntheticSpec, generate};
 
 fn candidate(kind: EffectKind) -> Candidate {
@@ -43,18 +43,16 @@ fn the_travel_accepts_the_true_model_and_prefers_it_to_a_manometer_offset_in_pla
     let e = spec.modulus_kpa;
     let pts = generate(&truth, None, |_| 0.0, &spec);
     let subset: Vec<usize> = (0..pts.len()).collect();
+    let exact = FittedCovariance::default();
+    let truth_fitted = FittedModel {
+        included: &[mu, scale],
+        cand: None,
+        theta: 0.0,
+        modulus_kpa: e,
+        covariance: &exact,
+    };
     // the true model's chi^2 is a draw of its distribution: p < 0.01 would be a 1 % event
-    let true_check = check(
-        &truth,
-        &[mu, scale],
-        None,
-        e,
-        0.0,
-        &FittedCovariance::default(),
-        &pts,
-        &subset,
-    )
-    .expect("a check");
+    let true_check = check(&truth, &truth_fitted, &pts, &subset).expect("a check");
     eprintln!("true model: {true_check:?}");
     assert_eq!(true_check.values, pts.len());
     assert!(true_check.p_value >= 0.01, "{true_check:?}");
@@ -103,31 +101,7 @@ fn the_travel_accepts_the_true_model_and_prefers_it_to_a_manometer_offset_in_pla
         .iter()
         .map(|p| diagnosis::data::Point { h_mm: None, ..*p })
         .collect();
-    assert!(
-        check(
-            &truth,
-            &[mu, scale],
-            None,
-            e,
-            0.0,
-            &FittedCovariance::default(),
-            &no_travel,
-            &subset
-        )
-        .is_none()
-    );
+    assert!(check(&truth, &truth_fitted, &no_travel, &subset).is_none());
     let few: Vec<usize> = (0..MIN_TRAVEL_POINTS - 1).collect();
-    assert!(
-        check(
-            &truth,
-            &[mu, scale],
-            None,
-            e,
-            0.0,
-            &FittedCovariance::default(),
-            &pts,
-            &few
-        )
-        .is_none()
-    );
+    assert!(check(&truth, &truth_fitted, &pts, &few).is_none());
 }
