@@ -823,7 +823,7 @@ fn search(
     let travel = match (&final_model, &final_fit) {
         (Some((tested, _)), Some((f, _))) => {
             let included: Vec<f64> = tested.included.iter().map(|(_, t)| *t).collect();
-            let cov = super::travel::FittedCovariance::of(f, true, Some(included.len() - 1));
+            let cov = super::travel::FittedCovariance::of(f, true, included.len().checked_sub(1));
             super::travel::check(
                 tested,
                 &super::travel::FittedModel {

@@ -6,15 +6,16 @@
 //! change that prediction in their own way, while a camera's scale or offset leave it alone.
 //! Behind a camera scale, friction and a manometer offset explain the radius and the load of
 //! two pressures almost alike (docs/diagnosis.md, step 7); their travels differ by 5-15 um
-//! at 6 and 15 kPa (170 kPa, mu 0.4), several times the travel's noise there.
+//! at 6 and 15 kPa (170 kPa, mu 0.4), though most of that is a shift of the modulus and
+//! the offset that their joint fit's uncertainty allows (step 8).
 //!
 //! The residuals r = h - h_model(u_s) of a fitted model get the noise model of the other
 //! channels ([`NoiseModel::estimate_channel`], estimated from the replicates: the u_s
 //! errors enter through dh/du_s, the table's interpolation across E2 as its own term),
-//! plus the uncertainty of the parameters fitted to the other channels, each a term
-//! common to every point, s_k s_k^T sigma_k^2 with s_k = dh/dtheta_k (the modulus in
-//! ln E2 and each effect's parameter; their correlation is left out). With w = L^-1 r and
-//! V = L^-1 [s_k sigma_k] (L the noise model's Cholesky factor), Woodbury gives
+//! plus the uncertainty of the parameters fitted to the other channels, S C S^T with
+//! S = dh/dq (the modulus in ln E2 and each effect's parameter) and C their covariance
+//! from that fit. With w = L^-1 r and V = L^-1 S L_c (L the noise model's Cholesky factor,
+//! L_c C's), Woodbury gives
 //!
 //! chi^2 = |w|^2 - w^T V (I + V^T V)^-1 V^T w,
 //!
@@ -63,9 +64,9 @@ pub struct FittedCovariance {
 }
 
 impl FittedCovariance {
-    /// The covariance of `fit`, a fit with a candidate (`with_theta`) or without, of a model
-    /// with `included` effects; `theta_as` renames the candidate's parameter (an effect the
-    /// checked model includes).
+    /// The covariance of `fit`, a fit with a candidate (`with_theta`) or without;
+    /// `theta_as` renames the candidate's parameter as an included effect's (when the checked
+    /// model includes the candidate). Empty when `fit` carries no covariance of that size.
     pub fn of(fit: &crate::fitting::GlsFit, with_theta: bool, theta_as: Option<usize>) -> Self {
         let mut order = vec![Parameter::LnModulus];
         if with_theta {
@@ -129,47 +130,37 @@ pub fn check(
     if r.iter().any(|x| !x.is_finite()) {
         return None;
     }
-    // each fitted parameter's sensitivity dh/dq (central differences)
-    let sensitivity = |q: Parameter| -> Vec<f64> {
+    // each fitted parameter's sensitivity dh/dq (central differences of step d)
+    let step = |q: Parameter| match q {
+        Parameter::LnModulus => 0.01,
+        Parameter::Theta => cand.map_or(0.0, |c| c.kind.step()),
+        Parameter::Included(j) => model
+            .included
+            .get(j)
+            .filter(|_| j < included.len())
+            .map_or(0.0, |(c, _)| c.kind.step()),
+    };
+    let shifted = |q: Parameter, x: f64, p: &Point| {
+        let (mut inc, mut e_q, mut theta_q) = (included.to_vec(), e, theta);
         match q {
-            Parameter::LnModulus => {
-                let d: f64 = 0.01;
-                with_travel
-                    .iter()
-                    .map(|p| {
-                        (h_of(included, e * d.exp(), theta, p)
-                            - h_of(included, e * (-d).exp(), theta, p))
-                            / (2.0 * d)
-                    })
-                    .collect()
-            }
-            Parameter::Theta => match cand {
-                Some(c) => {
-                    let d = c.kind.step();
-                    with_travel
-                        .iter()
-                        .map(|p| {
-                            (h_of(included, e, theta + d, p) - h_of(included, e, theta - d, p))
-                                / (2.0 * d)
-                        })
-                        .collect()
-                }
-                None => vec![0.0; with_travel.len()],
-            },
-            Parameter::Included(j) => match model.included.get(j) {
-                Some((c, _)) if j < included.len() => {
-                    let d = c.kind.step();
-                    let (mut lo, mut hi) = (included.to_vec(), included.to_vec());
-                    lo[j] -= d;
-                    hi[j] += d;
-                    with_travel
-                        .iter()
-                        .map(|p| (h_of(&hi, e, theta, p) - h_of(&lo, e, theta, p)) / (2.0 * d))
-                        .collect()
-                }
-                _ => vec![0.0; with_travel.len()],
-            },
+            Parameter::LnModulus => e_q *= x.exp(),
+            Parameter::Theta => theta_q += x,
+            Parameter::Included(j) => inc[j] += x,
         }
+        h_of(&inc, e_q, theta_q, p)
+    };
+    let sensitivity = |q: Parameter| -> Vec<f64> {
+        let d = step(q);
+        with_travel
+            .iter()
+            .map(|p| {
+                if d > 0.0 {
+                    (shifted(q, d, p) - shifted(q, -d, p)) / (2.0 * d)
+                } else {
+                    0.0
+                }
+            })
+            .collect()
     };
     // S L_c: the parameters' covariance S C S^T as a low-rank term
     let k = cov.order.len();
