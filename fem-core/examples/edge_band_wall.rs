@@ -10,6 +10,10 @@
 //!
 //!     cargo run --release -p fem-core --example edge_band_wall -- E2_kpa p_air_kpa 2,4,8,16 [OUT_DIR]
 //!
+//! A division written `8c` puts its elements through the wall under the band only, the
+//! production mesh's two elsewhere (and the production depth elements into the sample
+//! outside the band): `EdgeBand::coarse_outside`.
+//!
 //! With OUT_DIR, each curve is also written as `OUT_DIR/wall-N.csv` (u_s_mm, a_mm,
 //! load_n, p_air_kpa), which `tactile fit` reads: the modulus the shipped tables give for a
 //! sample whose wall is resolved.
@@ -36,10 +40,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let out_dir = args.get(3).map(std::path::PathBuf::from);
     let mut curves = Vec::new();
-    for wall in args[2].split(',') {
-        let wall: usize = wall.parse()?;
+    for label in args[2].split(',') {
+        // "8c": eight through the wall under the band only (EdgeBand::coarse_outside)
+        let (wall, coarse_outside) = match label.strip_suffix('c') {
+            Some(w) => (w.parse::<usize>()?, true),
+            None => (label.parse::<usize>()?, false),
+        };
         let mut sim = Simulation::new(&params).with_edge_band();
         sim.discretisation.mesh.shell.thickness = wall;
+        if let Some(band) = &mut sim.discretisation.edge_band {
+            band.coarse_outside = coarse_outside;
+        }
         let solved = sim.solve()?;
         let curve = solved.curve;
         let at: Vec<String> = DEPTHS_MM
@@ -48,14 +59,33 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .map(|p| format!("{:.5}", p.a_mm))
             .collect();
         println!(
-            "wall {wall}: {:.1} s ({:?}), a at h = 0.2..1.7 mm: {}",
+            "wall {label}: {:.1} s ({:?}), a at h = 0.2..1.7 mm: {}",
             curve.solve_seconds,
             solved.stop,
             at.join(" ")
         );
+        let work = solved.indentation.stage2_work();
+        println!(
+            "    {} elements, {} hanging nodes, {} equations on the last mesh, {} step attempts ({} failed), {} band moves; \
+             assembly {:.1} s, linear solves {:.1} s, {} factorisations",
+            solved.indentation.model.mesh.elements.len(),
+            solved.indentation.model.mesh.hanging.len(),
+            solved.indentation.model.n_equations(),
+            solved.indentation.attempts.len(),
+            solved
+                .indentation
+                .attempts
+                .iter()
+                .filter(|a| !a.converged)
+                .count(),
+            solved.indentation.band_moves,
+            work.assembly_seconds,
+            work.solve_seconds,
+            work.stats.factorizations,
+        );
         if let Some(dir) = &out_dir {
             std::fs::create_dir_all(dir)?;
-            let mut f = std::fs::File::create(dir.join(format!("wall-{wall}.csv")))?;
+            let mut f = std::fs::File::create(dir.join(format!("wall-{label}.csv")))?;
             writeln!(f, "u_s_mm,a_mm,load_n,p_air_kpa")?;
             for p in curve.points.iter().filter(|p| p.a_mm > 0.0) {
                 writeln!(
@@ -66,7 +96,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }
         }
         let us_a: Vec<(f64, f64)> = curve.points.iter().map(|p| (p.u_s_mm, p.a_mm)).collect();
-        curves.push((wall, us_a));
+        curves.push((label.to_string(), us_a));
     }
     let Some((finest, reference)) = curves.last().cloned() else {
         return Ok(());

@@ -59,6 +59,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 fine_size_mm: size,
                 half_width_mm: half_width,
                 depth_size_mm: size,
+                coarse_outside: false,
             };
             sim.discretisation.mesh.edge_window =
                 Some(EdgeWindow::over(band.extent(a0), size, size));

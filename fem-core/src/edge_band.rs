@@ -19,7 +19,7 @@
 use crate::mesh::Block;
 
 /// How the band around the contact edge is meshed and moved.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct EdgeBand {
     /// Element size inside the band (mm).
     pub fine_size_mm: f64,
@@ -27,6 +27,27 @@ pub struct EdgeBand {
     pub half_width_mm: f64,
     /// Element size through the sample's top layer (mm).
     pub depth_size_mm: f64,
+    /// Outside the band, the production mesh's elements through the shell's wall and into
+    /// the sample's depth, joined to the band's finer ones by hanging nodes
+    /// ([`crate::mesh::HangingNode`]); otherwise the band's wall and depth divisions run
+    /// along the whole shell and under the whole top surface.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub coarse_outside: bool,
+}
+
+/// The fields, `coarse_outside` only when set: the recorded solver descriptions of the
+/// tables built before it existed stay those of the same band.
+impl std::fmt::Debug for EdgeBand {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let mut d = f.debug_struct("EdgeBand");
+        d.field("fine_size_mm", &self.fine_size_mm)
+            .field("half_width_mm", &self.half_width_mm)
+            .field("depth_size_mm", &self.depth_size_mm);
+        if self.coarse_outside {
+            d.field("coarse_outside", &true);
+        }
+        d.finish()
+    }
 }
 
 /// Elements through the shell's 0.4 mm wall under the band. The production mesh's two
@@ -44,6 +65,7 @@ impl EdgeBand {
         fine_size_mm: 0.025,
         half_width_mm: 0.3,
         depth_size_mm: 0.05,
+        coarse_outside: false,
     };
 
     /// The band's extent [lo, hi] (current radius, mm) for an edge expected at `a_mm`: from

@@ -26,6 +26,42 @@ pub struct MeshElement {
 pub struct Mesh {
     pub nodes: Vec<[f64; 2]>,
     pub elements: Vec<MeshElement>,
+    /// Nodes whose displacement follows others' (see [`HangingNode`]).
+    pub hanging: Vec<HangingNode>,
+}
+
+/// A node of a fine element that lies on the edge of a coarser neighbour (or inside a
+/// coarse element, where no element uses it): its displacement is the coarse element's
+/// quadratic interpolation of its masters' along that edge, `u = sum w_k u_k`, which keeps
+/// the displacement field continuous across the change of element size (the constrained
+/// fine edge reproduces the coarse edge's quadratic exactly).
+#[derive(Debug, Clone, PartialEq)]
+pub struct HangingNode {
+    pub node: usize,
+    /// (master node, weight); the weights sum to one, the masters are never hanging.
+    pub masters: Vec<(usize, f64)>,
+}
+
+/// Where a structured block's elements are coarser than its node grid: along the
+/// coarsened `direction`, the element lines (the elements sharing one index across it)
+/// that are not `fine` merge the fine elements of each of `groups` into one element
+/// (uniform fine elements inside a group, so that its middle node is at its middle).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Coarsening {
+    /// The grid direction along which elements are merged.
+    pub direction: GridDirection,
+    /// Per element line across `direction`: every fine element kept.
+    pub fine: Vec<bool>,
+    /// Fine elements per coarse element along `direction`, in order (their sum is the
+    /// block's element count in that direction).
+    pub groups: Vec<usize>,
+}
+
+/// A direction of a structured block's grid.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GridDirection {
+    First,
+    Second,
 }
 
 /// A structured block of (2 nx_el + 1) x (2 ny_el + 1) nodes inside a [`Mesh`].
@@ -80,6 +116,91 @@ impl Mesh {
                     }
                 }
                 self.elements.push(MeshElement { nodes, body });
+            }
+        }
+        block
+    }
+
+    /// [`Self::add_block`] with the coarser elements of `coarsening` outside its fine
+    /// element lines; the grid nodes that no coarse element has as its own and that lie on
+    /// or inside one are appended to [`Mesh::hanging`], constrained to that element's
+    /// quadratic interpolation along the coarsened direction, at the parent coordinate the
+    /// node's grid position `along` (its coordinate along that direction) gives.
+    pub fn add_block_coarsened(
+        &mut self,
+        n1: usize,
+        n2: usize,
+        body: usize,
+        position: impl Fn(usize, usize) -> [f64; 2],
+        along: &[f64],
+        coarsening: &Coarsening,
+    ) -> Block {
+        let block = Block {
+            node_offset: self.nodes.len(),
+            n1,
+            n2,
+        };
+        for j in 0..n2 {
+            for i in 0..n1 {
+                self.nodes.push(position(i, j));
+            }
+        }
+        // (index p across the coarsened direction, index q along it) -> grid node
+        let first = coarsening.direction == GridDirection::First;
+        let at = |p: usize, q: usize| {
+            if first {
+                block.node(q, p)
+            } else {
+                block.node(p, q)
+            }
+        };
+        let n_lines = if first { n2 } else { n1 };
+        let mut hanging = vec![false; n1 * n2];
+        for e in 0..(n_lines - 1) / 2 {
+            let fine = coarsening.fine.get(e).copied().unwrap_or(true);
+            let mut start = 0;
+            for &count in &coarsening.groups {
+                let spans: Vec<(usize, usize)> = if fine {
+                    (0..count).map(|k| (2 * (start + k), 1)).collect()
+                } else {
+                    vec![(2 * start, count)]
+                };
+                for (q0, step) in spans {
+                    let mut nodes = [0; 9];
+                    for b in 0..3 {
+                        for a in 0..3 {
+                            // local node 3 b + a: a along the first grid direction
+                            let (pp, qq) = if first { (b, a) } else { (a, b) };
+                            nodes[3 * b + a] = at(2 * e + pp, q0 + qq * step);
+                        }
+                    }
+                    if self.parent_jacobian(&nodes) < 0.0 {
+                        for b in 0..3 {
+                            nodes.swap(3 * b, 3 * b + 2);
+                        }
+                    }
+                    self.elements.push(MeshElement { nodes, body });
+                }
+                if !fine && count > 1 {
+                    let qs = [2 * start, 2 * start + count, 2 * (start + count)];
+                    let (x0, x2) = (along[qs[0]], along[qs[2]]);
+                    for p in 2 * e..=2 * e + 2 {
+                        for q in qs[0] + 1..qs[2] {
+                            let node = at(p, q);
+                            if q == qs[1] || hanging[node - block.node_offset] {
+                                continue;
+                            }
+                            hanging[node - block.node_offset] = true;
+                            let eta = 2.0 * (along[q] - x0) / (x2 - x0) - 1.0;
+                            let (w, _) = crate::shape::line3(eta);
+                            self.hanging.push(HangingNode {
+                                node,
+                                masters: (0..3).map(|k| (at(p, qs[k]), w[k])).collect(),
+                            });
+                        }
+                    }
+                }
+                start += count;
             }
         }
         block
@@ -206,6 +327,20 @@ pub fn add_shell_with_arc_edges(
     arc_edges: &[f64],
     body: usize,
 ) -> ShellMesh {
+    add_shell_coarsened(mesh, geometry, div, arc_edges, None, body)
+}
+
+/// [`add_shell_with_arc_edges`] with the coarser elements of `coarsening` (the first grid
+/// direction runs along the arc and the skirt, the second through the wall from the inner
+/// surface; along the first the groups' elements must be of equal polar angle).
+pub fn add_shell_coarsened(
+    mesh: &mut Mesh,
+    geometry: &ShellGeometry,
+    div: &ShellDivisions,
+    arc_edges: &[f64],
+    coarsening: Option<&Coarsening>,
+    body: usize,
+) -> ShellMesh {
     let phis = with_midpoints(arc_edges);
     let arc = (phis.len() - 1) / 2;
     let n_arc_nodes = 2 * arc + 1;
@@ -213,7 +348,7 @@ pub fn add_shell_with_arc_edges(
     let n2 = 2 * div.thickness + 1;
     let g = *geometry;
     let skirt = div.skirt;
-    let block = mesh.add_block(n1, n2, body, |i, j| {
+    let position = |i: usize, j: usize| {
         let t = g.inner_radius_mm
             + (g.outer_radius_mm - g.inner_radius_mm) * j as f64 / (n2 - 1) as f64;
         if i < n_arc_nodes {
@@ -227,7 +362,17 @@ pub fn add_shell_with_arc_edges(
             let k = i - (n_arc_nodes - 1);
             [t, g.skirt_length_mm * k as f64 / (2 * skirt) as f64]
         }
-    });
+    };
+    let block = match coarsening {
+        None => mesh.add_block(n1, n2, body, position),
+        Some(c) => {
+            let along: Vec<f64> = match c.direction {
+                GridDirection::First => (0..n1).map(|i| i as f64).collect(),
+                GridDirection::Second => (0..n2).map(|j| j as f64).collect(),
+            };
+            mesh.add_block_coarsened(n1, n2, body, position, &along, c)
+        }
+    };
     let inner_surface = (0..n_arc_nodes).map(|i| block.node(i, 0)).collect();
     let outer_surface = (0..n_arc_nodes).map(|i| block.node(i, n2 - 1)).collect();
     let axis = (0..n2).map(|j| block.node(0, j)).collect();
@@ -459,6 +604,19 @@ pub fn add_sample_with_edges(
     depth_edges: &[f64],
     body: usize,
 ) -> SampleMesh {
+    add_sample_coarsened(mesh, geometry, r_edges, depth_edges, None, body)
+}
+
+/// [`add_sample_with_edges`] with the coarser elements of `coarsening` (the first grid
+/// direction runs radially from the axis, the second from the bottom up).
+pub fn add_sample_coarsened(
+    mesh: &mut Mesh,
+    geometry: &SampleGeometry,
+    r_edges: &[f64],
+    depth_edges: &[f64],
+    coarsening: Option<&Coarsening>,
+    body: usize,
+) -> SampleMesh {
     let r_nodes = with_midpoints(r_edges);
     // depth below the top surface, then ordered bottom -> top
     let mut z_nodes: Vec<f64> = with_midpoints(depth_edges)
@@ -468,7 +626,17 @@ pub fn add_sample_with_edges(
     z_nodes.reverse();
     let n1 = r_nodes.len();
     let n2 = z_nodes.len();
-    let block = mesh.add_block(n1, n2, body, |i, j| [r_nodes[i], z_nodes[j]]);
+    let position = |i: usize, j: usize| [r_nodes[i], z_nodes[j]];
+    let block = match coarsening {
+        None => mesh.add_block(n1, n2, body, position),
+        Some(c) => {
+            let along = match c.direction {
+                GridDirection::First => &r_nodes,
+                GridDirection::Second => &z_nodes,
+            };
+            mesh.add_block_coarsened(n1, n2, body, position, along, c)
+        }
+    };
     SampleMesh {
         block,
         top: (0..n1).map(|i| block.node(i, n2 - 1)).collect(),

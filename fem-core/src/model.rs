@@ -133,10 +133,14 @@ pub struct Model {
     solver: SymmetricSolver,
     /// Reference geometry of each element at its Gauss points (`None`: degenerate).
     geometry: Vec<Option<ElementGeometry>>,
+    /// Per node, its entry in `mesh.hanging` (a node constrained to its masters).
+    hanging_of: Vec<Option<usize>>,
+    /// Per element, whether any of its nodes is hanging (assembled through the masters).
+    constrained: Vec<bool>,
     /// The elements' tangent entries in assembly order (built on first use after the dof
     /// numbering changes): every assembly emits them first, so only their values are
     /// assembled and the solver keeps their positions in its pattern.
-    element_entries: OnceLock<Arc<SharedEntries>>,
+    element_entries: OnceLock<ElementEntries>,
     /// Total Newton iterations performed (diagnostic).
     pub newton_iterations: usize,
     /// CPU time spent in assembly and in the linear solver (diagnostic).
@@ -144,6 +148,14 @@ pub struct Model {
     pub solve_seconds: f64,
     /// Diagnostic counters of the Newton solves (see [`SolverStats`]).
     pub stats: SolverStats,
+}
+
+/// The elements' tangent entries in assembly order, and for each element with hanging
+/// nodes (in element order) the local entry (a, b) and factor of each of its values.
+#[derive(Debug)]
+struct ElementEntries {
+    shared: Arc<SharedEntries>,
+    constrained: Vec<Vec<(u8, u8, f64)>>,
 }
 
 /// Diagnostic counters of the Newton solves of one model.
@@ -208,13 +220,29 @@ impl Model {
             .iter()
             .map(|el| ElementGeometry::new(&mesh.element_coordinates(el)))
             .collect();
+        let mut hanging_of = vec![None; mesh.nodes.len()];
+        for (k, h) in mesh.hanging.iter().enumerate() {
+            hanging_of[h.node] = Some(k);
+        }
+        let constrained = mesh
+            .elements
+            .iter()
+            .map(|el| el.nodes.iter().any(|&n| hanging_of[n].is_some()))
+            .collect();
+        let mut equation = vec![Some(0); n_dofs];
+        for h in &mesh.hanging {
+            equation[2 * h.node] = None;
+            equation[2 * h.node + 1] = None;
+        }
         let mut model = Self {
             geometry,
+            hanging_of,
+            constrained,
             element_entries: OnceLock::new(),
             mesh,
             materials,
             formulation,
-            equation: vec![Some(0); n_dofs],
+            equation,
             prescribed: vec![0.0; n_dofs],
             n_equations: 0,
             pressure_surface: Vec::new(),
@@ -287,14 +315,97 @@ impl Model {
         std::array::from_fn(|k| 2 * el.nodes[k / 2] + k % 2)
     }
 
+    /// The equations dof `dof` enters with their weights: itself if free, none if
+    /// prescribed, its masters' free dofs if its node is hanging.
+    fn expansion(&self, dof: usize) -> Vec<(usize, f64)> {
+        match self.hanging_of[dof / 2] {
+            None => self.equation[dof].map(|e| (e, 1.0)).into_iter().collect(),
+            Some(k) => self.mesh.hanging[k]
+                .masters
+                .iter()
+                .filter_map(|&(m, w)| self.equation[2 * m + dof % 2].map(|e| (e, w)))
+                .collect(),
+        }
+    }
+
+    /// The tangent entries of an element with hanging nodes, `C^T K_e C` with the
+    /// constraints' weights C, in upper storage: for each local pair a <= b and each pair of
+    /// equations (p, q) they enter, `f(p, q, k)` with the factor k of K_e[a][b] in the
+    /// entry (a < b: the pair (b, a) adds the same value to the same upper entry only when
+    /// p == q; a == b: the pairs (p, q) and (q, p) share one upper entry).
+    fn for_each_constrained_entry(
+        &self,
+        dofs: &[usize; 18],
+        mut f: impl FnMut(usize, usize, usize, usize, f64),
+    ) {
+        let x: Vec<Vec<(usize, f64)>> = dofs.iter().map(|&d| self.expansion(d)).collect();
+        for a in 0..18 {
+            for b in a..18 {
+                for &(p, wp) in &x[a] {
+                    for &(q, wq) in &x[b] {
+                        if a == b && p > q {
+                            continue;
+                        }
+                        let k = if a < b && p == q { 2.0 } else { 1.0 };
+                        f(a, b, p, q, k * wp * wq);
+                    }
+                }
+            }
+        }
+    }
+
+    /// The displacement of dof `dof` in `u`: its own entry, or its masters' interpolation
+    /// for a hanging node.
+    fn dof_value(&self, u: &[f64], dof: usize) -> f64 {
+        match self.hanging_of[dof / 2] {
+            None => u[dof],
+            Some(k) => self.mesh.hanging[k]
+                .masters
+                .iter()
+                .map(|&(m, w)| w * u[2 * m + dof % 2])
+                .sum(),
+        }
+    }
+
+    /// Set the hanging nodes' displacements in `u` from their masters'.
+    pub fn apply_hanging(&self, u: &mut [f64]) {
+        for h in &self.mesh.hanging {
+            for c in 0..2 {
+                u[2 * h.node + c] = h.masters.iter().map(|&(m, w)| w * u[2 * m + c]).sum();
+            }
+        }
+    }
+
+    /// Move the forces at hanging nodes' dofs to their masters (`C^T f`).
+    fn condense_hanging(&self, f: &mut [f64]) {
+        for h in &self.mesh.hanging {
+            for c in 0..2 {
+                let v = std::mem::take(&mut f[2 * h.node + c]);
+                for &(m, w) in &h.masters {
+                    f[2 * m + c] += w * v;
+                }
+            }
+        }
+    }
+
     /// The upper-triangle entries the elements' tangents fill, in the order
     /// [`Self::assemble`] emits their values: per element, rows a and columns b >= a of its
     /// free dofs.
-    fn element_entries(&self) -> Arc<SharedEntries> {
-        let entries = self.element_entries.get_or_init(|| {
+    fn element_entries(&self) -> &ElementEntries {
+        self.element_entries.get_or_init(|| {
             let mut t = UpperTriplets::default();
-            for el in &self.mesh.elements {
+            let mut factors = Vec::new();
+            for (el, &constrained) in self.mesh.elements.iter().zip(&self.constrained) {
                 let dofs = Self::element_dofs(el);
+                if constrained {
+                    let mut local = Vec::new();
+                    self.for_each_constrained_entry(&dofs, |a, b, p, q, k| {
+                        t.add(p, q, 0.0);
+                        local.push((a as u8, b as u8, k));
+                    });
+                    factors.push(local);
+                    continue;
+                }
                 for a in 0..18 {
                     let Some(ea) = self.equation[dofs[a]] else {
                         continue;
@@ -306,12 +417,14 @@ impl Model {
                     }
                 }
             }
-            Arc::new(SharedEntries {
-                rows: t.rows,
-                cols: t.cols,
-            })
-        });
-        Arc::clone(entries)
+            ElementEntries {
+                shared: Arc::new(SharedEntries {
+                    rows: t.rows,
+                    cols: t.cols,
+                }),
+                constrained: factors,
+            }
+        })
     }
 
     /// Prescribe dof `dof` (= 2 node + component) to `value`.
@@ -355,13 +468,14 @@ impl Model {
         enclosed_volume(&pts)
     }
 
-    /// Apply the prescribed values to `u`.
+    /// Apply the prescribed values to `u`, then the hanging nodes' constraints.
     pub fn apply_prescribed(&self, u: &mut [f64]) {
         for (d, e) in self.equation.iter().enumerate() {
-            if e.is_none() {
+            if e.is_none() && self.hanging_of[d / 2].is_none() {
                 u[d] = self.prescribed[d];
             }
         }
+        self.apply_hanging(u);
     }
 
     /// Assemble residual and (optionally) tangent at `u` with internal pressure `p_kpa`.
@@ -373,15 +487,29 @@ impl Model {
             ..Default::default()
         };
         if with_tangent {
-            let shared = self.element_entries();
-            asm.tangent = UpperTriplets::with_shared(Arc::clone(&shared));
+            let shared = &self.element_entries().shared;
+            asm.tangent = UpperTriplets::with_shared(Arc::clone(shared));
             asm.tangent.values.reserve(shared.rows.len());
         }
         let mut internal = vec![0.0; n_dofs];
         let mut res = ElementResult::zeroed();
-        for (el, geometry) in self.mesh.elements.iter().zip(&self.geometry) {
+        let mut constrained_factors = with_tangent
+            .then(|| self.element_entries().constrained.iter())
+            .into_iter()
+            .flatten();
+        for ((el, geometry), &constrained) in self
+            .mesh
+            .elements
+            .iter()
+            .zip(&self.geometry)
+            .zip(&self.constrained)
+        {
             let dofs = Self::element_dofs(el);
-            let ue = ElementVector::from_fn(|k, _| u[dofs[k]]);
+            let ue = if constrained {
+                ElementVector::from_fn(|k, _| self.dof_value(u, dofs[k]))
+            } else {
+                ElementVector::from_fn(|k, _| u[dofs[k]])
+            };
             element::evaluate_geometry_into(
                 geometry.as_ref()?,
                 &ue,
@@ -394,7 +522,15 @@ impl Model {
             for a in 0..18 {
                 internal[dofs[a]] += res.residual[a];
             }
-            if with_tangent {
+            if with_tangent && constrained {
+                let factors = constrained_factors
+                    .next()
+                    .expect("one factor list per element with hanging nodes");
+                for &(a, b, k) in factors {
+                    asm.tangent
+                        .push_shared(k * res.tangent[(a as usize, b as usize)]);
+                }
+            } else if with_tangent {
                 // the values of element_entries(), in its order
                 for a in 0..18 {
                     if self.equation[dofs[a]].is_none() {
@@ -408,6 +544,7 @@ impl Model {
                 }
             }
         }
+        self.condense_hanging(&mut internal);
         asm.force_scale = internal.iter().map(|f| f * f).sum::<f64>().sqrt();
         for (r, f) in asm.residual.iter_mut().zip(&internal) {
             *r += f;
@@ -601,6 +738,7 @@ impl Model {
                 && c.abs() <= 1e-12
             {
                 self.newton_iterations += it;
+                self.apply_hanging(u);
                 return Ok(it);
             }
             // dR/d lambda by a forward difference of the residual
@@ -767,6 +905,7 @@ impl Model {
             {
                 let done = it.saturating_sub(1);
                 self.newton_iterations += done;
+                self.apply_hanging(u);
                 return Ok(done);
             }
             stagnant = if norm < 1e-3 * reference && norm > 0.5 * previous_norm {

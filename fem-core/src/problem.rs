@@ -25,8 +25,9 @@ use crate::edge_band::{EdgeBand, GridBlock, interpolate_linear, transfer_block};
 use crate::element::Formulation;
 use crate::material::Material;
 use crate::mesh::{
-    ArcGrading, Mesh, SampleGeometry, SampleGrading, SampleMesh, ShellDivisions, ShellGeometry,
-    ShellMesh, add_sample, add_sample_with_edges, add_shell_with_arc_edges, refined_edges,
+    ArcGrading, Coarsening, GridDirection, Mesh, SampleGeometry, SampleGrading, SampleMesh,
+    ShellDivisions, ShellGeometry, ShellMesh, add_sample, add_sample_coarsened,
+    add_sample_with_edges, add_shell_coarsened, refined_edges,
 };
 use crate::model::{Model, NewtonFailure, NewtonSettings, NewtonWork};
 
@@ -75,7 +76,7 @@ pub struct MeshSpec {
 /// and the elements beyond the growth's reach are those of the mesh without the band.
 /// The mesh of the converged reference in docs/fem-verification.md ("The converged
 /// contact radius: a band of fine elements at the edge").
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Clone, Copy, PartialEq)]
 pub struct EdgeWindow {
     /// Polar angles (rad) of the shell's arc between which its elements are fine.
     pub shell_angle_rad: [f64; 2],
@@ -88,6 +89,25 @@ pub struct EdgeWindow {
     pub depth_size_mm: f64,
     /// Ratio of neighbouring element sizes away from the band.
     pub growth: f64,
+    /// The wall's and the depth's fine divisions only under the band (see
+    /// [`EdgeBand::coarse_outside`]).
+    pub coarse_outside: bool,
+}
+
+/// The fields, `coarse_outside` only when set (as [`EdgeBand`]'s).
+impl std::fmt::Debug for EdgeWindow {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let mut d = f.debug_struct("EdgeWindow");
+        d.field("shell_angle_rad", &self.shell_angle_rad)
+            .field("sample_radius_mm", &self.sample_radius_mm)
+            .field("fine_size_mm", &self.fine_size_mm)
+            .field("depth_size_mm", &self.depth_size_mm)
+            .field("growth", &self.growth);
+        if self.coarse_outside {
+            d.field("coarse_outside", &true);
+        }
+        d.finish()
+    }
 }
 
 impl EdgeWindow {
@@ -102,6 +122,7 @@ impl EdgeWindow {
             fine_size_mm,
             depth_size_mm,
             growth: 1.3,
+            coarse_outside: false,
         }
     }
 }
@@ -230,14 +251,70 @@ impl SolverSettings {
     /// augmentation's penetration tolerance scaled to the band's element size.
     fn with_band(&self, band: &EdgeBand, extent_mm: [f64; 2]) -> Self {
         let mut s = self.clone();
-        s.mesh.edge_window = Some(EdgeWindow::over(
-            extent_mm,
-            band.fine_size_mm,
-            band.depth_size_mm,
-        ));
+        s.mesh.edge_window = Some(EdgeWindow {
+            coarse_outside: band.coarse_outside,
+            ..EdgeWindow::over(extent_mm, band.fine_size_mm, band.depth_size_mm)
+        });
         s.penetration_tolerance_mm = 5e-4 * band.fine_size_mm;
         s
     }
+}
+
+/// How far beyond the band (mm, along the surfaces) its fine wall and depth divisions
+/// reach when the mesh is coarse outside it ([`EdgeBand::coarse_outside`]).
+pub const BAND_COARSE_MARGIN_MM: f64 = 0.3;
+
+/// Depth (mm) of the sample's top layer whose elements keep the band's radial size; below
+/// it they take the production mesh's (hanging nodes between).
+pub const BAND_FINE_RADIAL_DEPTH_MM: f64 = 0.6;
+
+/// Elements through the wall outside the band when it is coarse there: the production
+/// mesh's.
+const COARSE_WALL_ELEMENTS: usize = 2;
+
+/// Per element column of the edges `edges`, whether it overlaps [lo - margin, hi + margin].
+fn element_columns_over(edges: &[f64], [lo, hi]: [f64; 2], margin: f64) -> Vec<bool> {
+    edges
+        .windows(2)
+        .map(|w| w[1] > lo - margin && w[0] < hi + margin)
+        .collect()
+}
+
+/// The shell's wall divisions merged to [`COARSE_WALL_ELEMENTS`] outside the band over
+/// the polar angles `band_rad` (and along the skirt); none if the wall's count is not a
+/// multiple of it.
+fn wall_coarsening(
+    arc_edges: &[f64],
+    div: &ShellDivisions,
+    band_rad: [f64; 2],
+) -> Option<Coarsening> {
+    let wall = div.thickness;
+    if wall <= COARSE_WALL_ELEMENTS || !wall.is_multiple_of(COARSE_WALL_ELEMENTS) {
+        return None;
+    }
+    let margin_rad = BAND_COARSE_MARGIN_MM / SHELL_OUTER_RADIUS_MM;
+    let mut fine = element_columns_over(arc_edges, band_rad, margin_rad);
+    fine.extend(std::iter::repeat_n(false, div.skirt));
+    Some(Coarsening {
+        direction: GridDirection::Second,
+        fine,
+        groups: vec![wall / COARSE_WALL_ELEMENTS; COARSE_WALL_ELEMENTS],
+    })
+}
+
+/// Edges that subdivide each element [x0, x1] of `base` uniformly into as many as the
+/// element size `target(x0, x1)` asks for, and the number of subdivisions of each base
+/// element: the base elements are the coarse elements where the mesh is coarse, and nested
+/// edges keep the hanging nodes on the coarse elements' edges.
+fn nested_edges(base: &[f64], target: impl Fn(f64, f64) -> f64) -> (Vec<f64>, Vec<usize>) {
+    let mut edges = vec![base[0]];
+    let mut groups = Vec::with_capacity(base.len() - 1);
+    for w in base.windows(2) {
+        let m = ((w[1] - w[0]) / target(w[0], w[1]) - 1e-9).ceil().max(1.0) as usize;
+        edges.extend((1..=m).map(|k| w[0] + (w[1] - w[0]) * k as f64 / m as f64));
+        groups.push(m);
+    }
+    (edges, groups)
 }
 
 /// Newton iterations allowed for the re-equilibration after a move of the edge band.
@@ -410,8 +487,18 @@ impl Indentation {
                 refined_edges(&arc_edges, lo, hi, fine_rad, w.growth)
             }
         };
-        let shell =
-            add_shell_with_arc_edges(&mut mesh, &shell_geometry, &spec.shell, &arc_edges, 0);
+        let wall_coarsening = spec
+            .edge_window
+            .filter(|w| w.coarse_outside)
+            .and_then(|w| wall_coarsening(&arc_edges, &spec.shell, w.shell_angle_rad));
+        let shell = add_shell_coarsened(
+            &mut mesh,
+            &shell_geometry,
+            &spec.shell,
+            &arc_edges,
+            wall_coarsening.as_ref(),
+            0,
+        );
         let grading = SampleGrading {
             fine_size_mm: spec.sample_fine_size_mm,
             fine_depth_size_mm: spec.sample_depth_size_mm,
@@ -427,6 +514,37 @@ impl Indentation {
             };
             match &spec.edge_window {
                 None => add_sample(&mut mesh, &geometry, &grading, 1),
+                Some(w) if w.coarse_outside => {
+                    let (r_base, depth_base) = grading.edges(&geometry);
+                    let [lo, hi] = w.sample_radius_mm;
+                    // the base's radial elements subdivided as the band's size field asks
+                    let (r_edges, groups) = nested_edges(&r_base, |x0, x1| {
+                        let distance = (lo - x1).max(x0 - hi).max(0.0);
+                        w.fine_size_mm + (w.growth - 1.0) * distance
+                    });
+                    let depth_edges =
+                        refined_edges(&depth_base, 0.0, 0.0, w.depth_size_mm, w.growth);
+                    // element rows from the bottom up: the band's radial elements in the
+                    // top layer only
+                    let fine = depth_edges
+                        .windows(2)
+                        .rev()
+                        .map(|d| d[0] < BAND_FINE_RADIAL_DEPTH_MM)
+                        .collect();
+                    let coarsening = Coarsening {
+                        direction: GridDirection::First,
+                        fine,
+                        groups,
+                    };
+                    add_sample_coarsened(
+                        &mut mesh,
+                        &geometry,
+                        &r_edges,
+                        &depth_edges,
+                        Some(&coarsening),
+                        1,
+                    )
+                }
                 Some(w) => {
                     let (r_base, depth_base) = grading.edges(&geometry);
                     let [lo, hi] = w.sample_radius_mm;
@@ -983,6 +1101,7 @@ impl Indentation {
             c0 + t * (c1 - c0)
         };
         let mut window = EdgeWindow::over(extent_mm, band.fine_size_mm, band.depth_size_mm);
+        window.coarse_outside = band.coarse_outside;
         window.shell_angle_rad =
             extent_mm.map(|r| to_reference(&self.shell.outer_surface, &|[x, z]| x.atan2(-z), r));
         if let Some(sample) = &self.sample {
@@ -1023,6 +1142,11 @@ impl Indentation {
     /// Displacements `u` of `old` (a model of the same problem on another mesh)
     /// interpolated at this model's nodes, block by block (`edge_band::transfer_block`).
     fn carried_over(&self, old: &Indentation, u: &[f64]) -> Vec<f64> {
+        // the old mesh's hanging nodes at their constrained values: the grids interpolate
+        // every node
+        let mut u_old = u.to_vec();
+        old.model.apply_hanging(&mut u_old);
+        let u = &u_old[..];
         let mut u_new = vec![0.0; self.model.n_dofs()];
         let (old_1, old_2) = old.shell_grid();
         let (new_1, new_2) = self.shell_grid();

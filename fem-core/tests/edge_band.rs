@@ -9,6 +9,7 @@ const BAND: EdgeBand = EdgeBand {
     fine_size_mm: 0.05,
     half_width_mm: 0.3,
     depth_size_mm: 0.1,
+    coarse_outside: false,
 };
 
 fn params(depth_mm: f64, steps: usize) -> CurveParams {
@@ -61,6 +62,48 @@ fn a_band_moved_along_the_curve_ends_where_a_fixed_band_does() {
     // of penetration) and Newton's: measured 16 nm in a, 2e-7 in the load, 1.5e-8 mm in u_s;
     // the bounds are a few times that and far below the band's own discretisation error
     // (~1 um in a), which a wrong transfer would exceed
+    assert!(
+        (end.a_mm - reference.a_mm).abs() < 1e-4,
+        "a {} vs {}",
+        end.a_mm,
+        reference.a_mm
+    );
+    assert!((end.load_n / reference.load_n - 1.0).abs() < 1e-5);
+    assert!((end.u_s_mm - reference.u_s_mm).abs() < 1e-6);
+}
+
+/// The same with the band's four wall elements and its radial size in the sample's top
+/// layer only under the band, the production mesh's two and 0.2 mm elsewhere, joined by
+/// hanging nodes (`EdgeBand::coarse_outside`): the constrained nodes must carry over to
+/// each new mesh and the junctions must not leave a state behind.
+#[test]
+fn a_band_coarse_outside_moved_along_the_curve_ends_where_a_fixed_one_does() {
+    let band = EdgeBand {
+        coarse_outside: true,
+        ..BAND
+    };
+    let mut moving = Simulation::new(&params(0.5, 10));
+    moving.discretisation.edge_band = Some(band);
+    moving.discretisation.mesh.shell.thickness = 4;
+    let moving = moving.solve().unwrap();
+    assert!(moving.indentation.band_moves >= 2);
+    assert!(!moving.indentation.model.mesh.hanging.is_empty());
+    let window = moving.indentation.edge_window.unwrap();
+    assert!(window.coarse_outside);
+    let equations = moving.indentation.model.n_equations();
+    let end = moving.complete().unwrap();
+    let end = end.points.last().unwrap();
+
+    let mut fixed = Simulation::new(&params(0.5, 10));
+    fixed.discretisation.mesh.edge_window = Some(window);
+    fixed.discretisation.mesh.shell.thickness = 4;
+    fixed.nonlinear_solver.penetration_tolerance_mm = 5e-4 * BAND.fine_size_mm;
+    let fixed = fixed.solve().unwrap();
+    assert_eq!(fixed.indentation.model.n_equations(), equations);
+    let fixed = fixed.complete().unwrap();
+    let reference = fixed.points.last().unwrap();
+    // the bounds of the test above: the solver's tolerances, far below what a wrong
+    // transfer of the constrained nodes would leave
     assert!(
         (end.a_mm - reference.a_mm).abs() < 1e-4,
         "a {} vs {}",

@@ -292,3 +292,140 @@ fn strain_stiffening_sphere_inflation_matches_the_exact_incompressible_yeoh_solu
         );
     }
 }
+
+/// The sphere's mesh with eight elements through the wall over the middle of the arc and
+/// two elsewhere, joined by hanging nodes (`Mesh::add_block_coarsened`).
+fn coarsened_sphere(law: MaterialLaw, nu: f64) -> (Model, fem_core::mesh::ShellMesh) {
+    use fem_core::mesh::{Coarsening, GridDirection, add_shell_coarsened};
+    let divisions = ShellDivisions {
+        arc: 8,
+        skirt: 0,
+        thickness: 8,
+    };
+    let arc_edges: Vec<f64> = (0..=8)
+        .map(|k| std::f64::consts::FRAC_PI_2 * k as f64 / 8.0)
+        .collect();
+    let coarsening = Coarsening {
+        direction: GridDirection::Second,
+        fine: (0..8).map(|e| (3..5).contains(&e)).collect(),
+        groups: vec![4, 4],
+    };
+    let mut mesh = Mesh::default();
+    let shell = add_shell_coarsened(
+        &mut mesh,
+        &ShellGeometry {
+            inner_radius_mm: 4.6,
+            outer_radius_mm: 5.0,
+            skirt_length_mm: 0.0,
+        },
+        &divisions,
+        &arc_edges,
+        Some(&coarsening),
+        0,
+    );
+    // 6 coarse columns of 2 x 4 elements, 2 fine columns of 8
+    assert_eq!(mesh.elements.len(), 6 * 2 + 2 * 8);
+    assert!(!mesh.hanging.is_empty());
+    let material = Material::from_young_poisson(2300.0, nu, law);
+    let mut model = Model::new(mesh, vec![material], Formulation::Mixed);
+    let mut fixed: Vec<usize> = shell.axis.iter().map(|&n| 2 * n).collect();
+    fixed.extend(shell.equator.iter().map(|&n| 2 * n + 1));
+    model.fix_all(fixed);
+    model.pressure_surface = shell.inner_surface.clone();
+    (model, shell)
+}
+
+#[test]
+fn hanging_nodes_keep_the_lame_sphere_spherical() {
+    // The pressurised sphere's displacement is radial and the same at every polar angle;
+    // a change of wall division along the arc must neither break that symmetry nor move
+    // the solution away from Lamé's (same 0.5 % as the uniform mesh above). A
+    // non-conforming junction or a wrong constraint shows as a kink at the fine columns.
+    let (mut model, shell) = coarsened_sphere(MaterialLaw::Linear, 0.49);
+    let mut u = vec![0.0; model.n_dofs()];
+    model.solve_equilibrium(&mut u, 15.0).unwrap();
+    let (a, b, e, nu, p): (f64, f64, f64, f64, f64) = (4.6, 5.0, 2300.0, 0.49, 15.0);
+    let lame = |r: f64| {
+        p * a.powi(3) / (e * (b.powi(3) - a.powi(3)))
+            * ((1.0 - 2.0 * nu) * r + (1.0 + nu) * b.powi(3) / (2.0 * r * r))
+    };
+    let radial = |n: usize| {
+        let x = model.mesh.nodes[n];
+        (u[2 * n] * x[0] + u[2 * n + 1] * x[1]) / (x[0] * x[0] + x[1] * x[1]).sqrt()
+    };
+    for (surface, r) in [(&shell.inner_surface, a), (&shell.outer_surface, b)] {
+        for &n in surface.iter() {
+            let ur = radial(n);
+            assert!(
+                (ur / lame(r) - 1.0).abs() < 5e-3,
+                "node {n}: {ur} vs {}",
+                lame(r)
+            );
+        }
+        // symmetry: 2e-3 as for the uniform mesh's apex against its equator
+        let first = radial(surface[0]);
+        for &n in surface.iter() {
+            assert!(
+                (radial(n) / first - 1.0).abs() < 2e-3,
+                "node {n} breaks symmetry"
+            );
+        }
+    }
+    // every hanging node sits on its masters' quadratic: the field there is the
+    // interpolation of theirs
+    for h in &model.mesh.hanging {
+        for c in 0..2 {
+            let interpolated: f64 = h.masters.iter().map(|&(m, w)| w * u[2 * m + c]).sum();
+            assert!((u[2 * h.node + c] - interpolated).abs() < 1e-15);
+        }
+    }
+}
+
+#[test]
+fn tangent_with_hanging_nodes_matches_finite_differences() {
+    // C^T K C and C^T r: the assembled tangent over the free dofs against central
+    // differences of the condensed residual, moving each probed dof with its hanging
+    // dependants (the state is off equilibrium, nonlinear material and follower pressure).
+    let (model, _) = coarsened_sphere(MaterialLaw::NeoHookean, 0.45);
+    let n_dofs = model.n_dofs();
+    let mut u: Vec<f64> = (0..n_dofs)
+        .map(|i| 5e-3 * ((i as f64) * 0.37).sin())
+        .collect();
+    model.apply_prescribed(&mut u);
+    let p = 10.0;
+    let asm = model.assemble(&u, p, true).unwrap();
+    let free: Vec<usize> = (0..n_dofs).filter(|&d| model.is_free(d)).collect();
+    let mut eq = vec![usize::MAX; n_dofs];
+    for (k, &d) in free.iter().enumerate() {
+        eq[d] = k;
+    }
+    let mut worst: f64 = 0.0;
+    for &d in free.iter().step_by(7) {
+        let h = 1e-7;
+        let residual_at = |shift: f64| {
+            let mut v = u.clone();
+            v[d] += shift;
+            model.apply_prescribed(&mut v);
+            model.assemble(&v, p, false).unwrap().residual
+        };
+        let (rp, rm) = (residual_at(h), residual_at(-h));
+        let j = eq[d];
+        let mut column = vec![0.0; free.len()];
+        for (r, c, v) in asm.tangent.entries() {
+            if c == j {
+                column[r] += v;
+            }
+            if r == j && r != c {
+                column[c] += v;
+            }
+        }
+        let scale = column.iter().fold(0.0, |m: f64, v| m.max(v.abs()));
+        for (k, &dd) in free.iter().enumerate() {
+            let fd = (rp[dd] - rm[dd]) / (2.0 * h);
+            worst = worst.max((fd - column[k]).abs() / scale);
+        }
+    }
+    // central differences with h = 1e-7 mm: truncation ~h^2 and round-off ~1e-16 / h of
+    // the column's scale, well under 1e-6
+    assert!(worst < 1e-6, "tangent vs finite differences: {worst:e}");
+}
