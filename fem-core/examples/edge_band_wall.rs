@@ -11,8 +11,8 @@
 //!     cargo run --release -p fem-core --example edge_band_wall -- E2_kpa p_air_kpa 2,4,8,16 [OUT_DIR]
 //!
 //! A division written `8c` puts its elements through the wall under the band only, the
-//! production mesh's two elsewhere (and the production depth elements into the sample
-//! outside the band): `EdgeBand::coarse_outside`.
+//! production mesh's two elsewhere (and the production mesh's radial elements in the
+//! sample below its top 0.6 mm): `EdgeBand::coarse_outside`.
 //!
 //! With OUT_DIR, each curve is also written as `OUT_DIR/wall-N.csv` (u_s_mm, a_mm,
 //! load_n, p_air_kpa), which `tactile fit` reads: the modulus the shipped tables give for a
