@@ -17,7 +17,10 @@ use diagnosis::simulate::{SimSpec, simulate_with, truth_mechanics, truth_scenari
 use diagnosis::tables::shipped_tables;
 use diagnosis::{DiagnoseOptions, diagnose};
 
-fn false_positives(seeds: u64, modulus_kpa: f64) -> (usize, Vec<String>) {
+/// The false positives and their descriptions, and the p-value of each seed's tube-travel
+/// check under its final model (`diagnosis::travel`; the simulated bench records the
+/// stage's travel).
+fn false_positives(seeds: u64, modulus_kpa: f64) -> (usize, Vec<String>, Vec<f64>) {
     let (base, effects) = shipped_tables().expect("diagnosis test setup");
     let spec0 = SimSpec {
         modulus_kpa,
@@ -31,6 +34,7 @@ fn false_positives(seeds: u64, modulus_kpa: f64) -> (usize, Vec<String>) {
     let mech = truth_mechanics(&scenario).expect("diagnosis test setup");
     let mut fp = 0;
     let mut labels = Vec::new();
+    let mut travel_p = Vec::new();
     for seed in 1..=seeds {
         let spec = SimSpec {
             seed: 1000 + seed,
@@ -49,6 +53,15 @@ fn false_positives(seeds: u64, modulus_kpa: f64) -> (usize, Vec<String>) {
             ..DiagnoseOptions::default()
         };
         let d = diagnose(&base, &effects, points, &options).expect("diagnosis test setup");
+        travel_p.extend(d.forward.travel.map(|t| t.p_value));
+        if let Some(t) = d.forward.travel.filter(|t| t.p_value < 0.01) {
+            println!(
+                "  seed {seed}: the travel rejects the final model ({}): p {:.2e}, RMS {:.1} um",
+                d.verdict.as_str(),
+                t.p_value,
+                t.rms_residual_mm * 1e3
+            );
+        }
         if d.verdict.as_str() != "none" {
             fp += 1;
             labels.push(format!(
@@ -79,12 +92,39 @@ fn false_positives(seeds: u64, modulus_kpa: f64) -> (usize, Vec<String>) {
             ));
         }
     }
-    (fp, labels)
+    (fp, labels, travel_p)
+}
+
+/// How often the travel check rejects the final model at the 5 % and the 1 % level.
+fn travel_rejections(p_values: &[f64]) -> String {
+    let below = |level: f64| p_values.iter().filter(|&&p| p < level).count();
+    let mut sorted = p_values.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let quantile = |q: f64| {
+        sorted
+            .get(((sorted.len() as f64 - 1.0) * q).round() as usize)
+            .copied()
+            .unwrap_or(f64::NAN)
+    };
+    format!(
+        "travel check under the final model: p < 0.05 in {} of {}, p < 0.01 in {} of {} \
+         (p: smallest {:.3}, quartiles {:.2} / {:.2} / {:.2}; uniform if the check is exact)",
+        below(0.05),
+        p_values.len(),
+        below(0.01),
+        p_values.len(),
+        quantile(0.0),
+        quantile(0.25),
+        quantile(0.5),
+        quantile(0.75)
+    )
 }
 
 #[test]
 fn clean_data_rarely_names_an_effect() {
-    let (fp, labels) = false_positives(6, SimSpec::default().modulus_kpa);
+    let (fp, labels, travel_p) = false_positives(6, SimSpec::default().modulus_kpa);
+    // every simulated record carries the stage's travel, so every seed gets its check
+    assert_eq!(travel_p.len(), 6, "{}", travel_rejections(&travel_p));
     // at most 2 of 6: see the module docs (binomial at the 5 % target)
     assert!(fp <= 2, "{fp} of 6 false positives: {labels:?}");
 }
@@ -100,8 +140,9 @@ fn false_positive_rate_over_100_seeds_is_at_most_5_percent() {
         .ok()
         .and_then(|s| s.parse().ok())
         .unwrap_or(SimSpec::default().modulus_kpa);
-    let (fp, labels) = false_positives(seeds, modulus_kpa);
+    let (fp, labels, travel_p) = false_positives(seeds, modulus_kpa);
     println!("false positives at E2 = {modulus_kpa} kPa: {fp} of {seeds}:");
+    println!("{}", travel_rejections(&travel_p));
     for l in &labels {
         println!("  {l}");
     }
