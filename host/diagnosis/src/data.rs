@@ -15,7 +15,11 @@ pub struct Point {
     pub test: u32,
     pub load_n: Option<f64>,
     pub t_s: Option<f64>,
+    /// The tube's travel from first contact (mm), where the data record it.
     pub h_mm: Option<f64>,
+    /// `h_mm` is a stage position whose zero, the stage at first contact, is not known:
+    /// the travel check fits it per replicate ([`crate::travel`]).
+    pub h_zero_fitted: bool,
 }
 
 /// Why the curves cannot be diagnosed.
@@ -64,7 +68,10 @@ pub fn points_from_curves(curves: &[(String, CurveCsv)]) -> Result<Vec<Point>, D
                 test: k as u32 * 10_000 + row.test.unwrap_or(0),
                 load_n: row.load_n,
                 t_s: row.t_s,
-                h_mm: row.h_mm,
+                // a record's stage position stands in for the travel, its zero (the
+                // stage at first contact) unknown
+                h_mm: row.h_mm.or(row.stage_mm),
+                h_zero_fitted: row.h_mm.is_none() && row.stage_mm.is_some(),
             });
         }
         if out.len() == before {
@@ -194,6 +201,7 @@ fn mean_point(bin: &[Point]) -> Point {
         load_n: mean_opt(&|q| q.load_n),
         t_s: mean_opt(&|q| q.t_s),
         h_mm: mean_opt(&|q| q.h_mm),
+        h_zero_fitted: bin.iter().any(|q| q.h_zero_fitted),
     }
 }
 
@@ -210,6 +218,7 @@ mod tests {
             load_n: Some(u),
             t_s: None,
             h_mm: Some(u),
+            h_zero_fitted: false,
         }
     }
 

@@ -819,6 +819,7 @@ mod usable_tests {
                     load_n: None,
                     t_s: None,
                     h_mm: None,
+                    h_zero_fitted: false,
                 }
             })
             .collect();

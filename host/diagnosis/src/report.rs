@@ -540,9 +540,17 @@ fn travel_text(s: &mut String, d: &Diagnosis) {
         } else {
             "the baseline"
         };
+        let zeros = if t.fitted_zeros > 0 {
+            format!(
+                " (the stage's position at first contact fitted for each of {} indentations)",
+                t.fitted_zeros
+            )
+        } else {
+            String::new()
+        };
         let _ = writeln!(
             s,
-            "  tube travel under {model} (h against u_s, which neither the camera nor the load cell sees): chi2 {:.1} on {} values, RMS {:.4} mm, p {}",
+            "  tube travel under {model} (h against u_s, which neither the camera nor the load cell sees): chi2 {:.1} on {} values, RMS {:.4} mm, p {}{zeros}",
             t.chi2,
             t.values,
             t.rms_residual_mm,

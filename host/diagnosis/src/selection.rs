@@ -698,6 +698,7 @@ mod tests {
                     load_n: None,
                     t_s: Some(t),
                     h_mm: Some(t),
+                    h_zero_fitted: false,
                 });
                 r.push(common(t) + walk);
                 own.push(walk);

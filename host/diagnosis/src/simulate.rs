@@ -610,6 +610,7 @@ pub fn simulate_with(spec: &SimSpec, scenario: &Scenario, truth: &Truth) -> Vec<
                     load_n: Some(cs.load_n + load_tare + rng.normal(white_load_n)),
                     t_s: Some(t),
                     h_mm: Some(h),
+                    h_zero_fitted: false,
                 });
             }
         }
@@ -645,6 +646,7 @@ pub fn to_curve_csv(points: &[Point], note: &str) -> Result<String, fit::curve_c
                 phase: Some(Phase::Load),
                 test: Some(p.test),
                 h_mm: p.h_mm,
+                stage_mm: None,
                 volume_mm3: None,
             })
             .collect(),

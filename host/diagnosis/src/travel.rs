@@ -22,6 +22,17 @@
 //! tested on as many degrees of freedom as values (no parameter is fitted to the travel).
 //! The travel shares the u_s errors with the radius and the load; the test reads it on its
 //! own, not jointly with them.
+//!
+//! A bench record holds the stage's position, not the travel: its zero, the stage where
+//! the shell first touches the sample, is not measured ([`Point::h_zero_fitted`]). Each
+//! such replicate's zero is then a free offset c_t: with Q = I - V (I + V^T V)^-1 V^T (the
+//! whitened inverse covariance above) and Z the whitened indicators of those replicates,
+//! the offsets are profiled out,
+//!
+//! chi^2 = w^T Q w - (Z^T Q w)^T (Z^T Q Z)^-1 (Z^T Q w),
+//!
+//! on as many degrees of freedom as values less one per fitted zero (the residuals minus
+//! each replicate's mean also feed the noise model, whose own offsets the zeros absorb).
 
 use serde::Serialize;
 
@@ -40,6 +51,9 @@ pub const MIN_TRAVEL_POINTS: usize = 20;
 pub struct TravelCheck {
     pub chi2: f64,
     pub values: usize,
+    /// Indentations (a replicate at one pressure) whose travel zero was fitted (records of
+    /// the stage's position).
+    pub fitted_zeros: usize,
     pub p_value: f64,
     /// RMS of h - h_model (mm).
     pub rms_residual_mm: f64,
@@ -123,12 +137,45 @@ pub fn check(
     let h_of = |included: &[f64], e: f64, theta: f64, p: &Point| {
         predict_with(model, included, cand, e, theta, p, Channel::Travel)
     };
-    let r: Vec<f64> = with_travel
+    let mut r: Vec<f64> = with_travel
         .iter()
         .map(|p| Channel::Travel.measured(p) - h_of(included, e, theta, p))
         .collect();
     if r.iter().any(|x| !x.is_finite()) {
         return None;
+    }
+    // the indentations whose zero is fitted (a replicate at one pressure: the inflated
+    // shell meets the sample at another stage position at each), each as its points'
+    // indicator; their residuals less their mean (the chi^2 below does not depend on it)
+    let indentation = |p: &Point| (p.test, p.p_air_kpa.to_bits());
+    let mut zero_tests: Vec<(u32, u64)> = with_travel
+        .iter()
+        .filter(|p| p.h_zero_fitted)
+        .map(indentation)
+        .collect();
+    zero_tests.sort_unstable();
+    zero_tests.dedup();
+    let indicators: Vec<Vec<f64>> = zero_tests
+        .iter()
+        .map(|&t| {
+            with_travel
+                .iter()
+                .map(|p| {
+                    if p.h_zero_fitted && indentation(p) == t {
+                        1.0
+                    } else {
+                        0.0
+                    }
+                })
+                .collect()
+        })
+        .collect();
+    for z in &indicators {
+        let n: f64 = z.iter().sum();
+        let mean = r.iter().zip(z).map(|(x, zi)| x * zi).sum::<f64>() / n;
+        for (x, zi) in r.iter_mut().zip(z) {
+            *x -= mean * zi;
+        }
     }
     // each fitted parameter's sensitivity dh/dq (central differences of step d)
     let step = |q: Parameter| match q {
@@ -186,25 +233,44 @@ pub fn check(
     let whitener = noise.whitener(&with_travel, &all)?;
     let w = whitener.whiten(&r);
     let v: Vec<Vec<f64>> = columns.iter().map(|c| whitener.whiten(c)).collect();
-    let mut chi2: f64 = linalg::dot(&w, &w);
     let k = v.len();
-    if k > 0 {
-        // Woodbury: subtract w^T V (I + V^T V)^-1 V^T w
-        let mut gram = vec![0.0; k * k];
-        for a in 0..k {
-            for b in 0..k {
-                gram[a * k + b] = linalg::dot(&v[a], &v[b]) + if a == b { 1.0 } else { 0.0 };
-            }
+    let mut gram = vec![0.0; k * k];
+    for a in 0..k {
+        for b in 0..k {
+            gram[a * k + b] = linalg::dot(&v[a], &v[b]) + if a == b { 1.0 } else { 0.0 };
         }
-        let vw: Vec<f64> = v.iter().map(|va| linalg::dot(va, &w)).collect();
-        let y = linalg::solve_spd(&gram, k, &vw)?;
-        chi2 -= linalg::dot(&vw, &y);
+    }
+    // x^T Q y with Q = I - V (I + V^T V)^-1 V^T (Woodbury)
+    let q_form = |x: &[f64], y: &[f64]| -> Option<f64> {
+        let mut out = linalg::dot(x, y);
+        if k > 0 {
+            let vy: Vec<f64> = v.iter().map(|va| linalg::dot(va, y)).collect();
+            let vx: Vec<f64> = v.iter().map(|va| linalg::dot(va, x)).collect();
+            out -= linalg::dot(&vx, &linalg::solve_spd(&gram, k, &vy)?);
+        }
+        Some(out)
+    };
+    let mut chi2 = q_form(&w, &w)?;
+    let zw: Vec<Vec<f64>> = indicators.iter().map(|z| whitener.whiten(z)).collect();
+    let m = zw.len();
+    if m > 0 {
+        let mut g = vec![0.0; m * m];
+        let mut b = vec![0.0; m];
+        for i in 0..m {
+            for j in 0..m {
+                g[i * m + j] = q_form(&zw[i], &zw[j])?;
+            }
+            b[i] = q_form(&zw[i], &w)?;
+        }
+        chi2 -= linalg::dot(&b, &linalg::solve_spd(&g, m, &b)?);
     }
     let values = whitener.len();
+    let dof = values.saturating_sub(m).max(1);
     Some(TravelCheck {
         chi2,
         values,
-        p_value: stats::chi2_sf(chi2, values as f64),
+        fitted_zeros: m,
+        p_value: stats::chi2_sf(chi2, dof as f64),
         rms_residual_mm: (r.iter().map(|x| x * x).sum::<f64>() / r.len() as f64).sqrt(),
     })
 }

@@ -105,3 +105,76 @@ fn the_travel_accepts_the_true_model_and_prefers_it_to_a_manometer_offset_in_pla
     let few: Vec<usize> = (0..MIN_TRAVEL_POINTS - 1).collect();
     assert!(check(&truth, &truth_fitted, &pts, &few).is_none());
 }
+
+/// A bench record holds the stage's position, whose zero (the stage at first contact) is
+/// not known: the check fits it per indentation (replicate and pressure). Then any shift of a replicate's readings
+/// leaves the check unchanged, the true model still passes, and friction hidden behind a
+/// camera scale still shows in the shape of h(u_s) when only the scale is in the model.
+#[test]
+fn a_stage_position_with_unknown_zeros_is_checked_with_one_fitted_zero_per_replicate() {
+    let (base, effects) = shipped_tables().expect("shipped tables");
+    let model = Model::new(&base, &effects).expect("model");
+    let (mu, scale) = (0.4, 0.03);
+    let mut truth = model.clone();
+    truth.included = vec![
+        (candidate(EffectKind::Friction), mu),
+        (candidate(EffectKind::RadiusScale), scale),
+    ];
+    let spec = SyntheticSpec {
+        white_u_mm: 0.003,
+        offset_u_mm: 0.002,
+        seed: 5,
+        ..SyntheticSpec::default()
+    };
+    let e = spec.modulus_kpa;
+    let exact_zero = generate(&truth, None, |_| 0.0, &spec);
+    // the stage's own zero: several mm away from first contact, another for each replicate
+    let stage = |shift: f64| -> Vec<diagnosis::data::Point> {
+        exact_zero
+            .iter()
+            .map(|p| diagnosis::data::Point {
+                h_mm: p
+                    .h_mm
+                    .map(|h| h + 3.0 + shift * (p.test as f64 + 0.1 * p.p_air_kpa)),
+                h_zero_fitted: true,
+                ..*p
+            })
+            .collect()
+    };
+    let subset: Vec<usize> = (0..exact_zero.len()).collect();
+    // one zero per replicate and pressure
+    let indentations = {
+        let mut t: Vec<(u32, u64)> = exact_zero
+            .iter()
+            .map(|p| (p.test, p.p_air_kpa.to_bits()))
+            .collect();
+        t.sort_unstable();
+        t.dedup();
+        t.len()
+    };
+    let exact = FittedCovariance::default();
+    let fitted = |included: &'static [f64]| FittedModel {
+        included,
+        cand: None,
+        theta: 0.0,
+        modulus_kpa: e,
+        covariance: &exact,
+    };
+    let a = check(&truth, &fitted(&[0.4, 0.03]), &stage(0.0), &subset).expect("a check");
+    let b = check(&truth, &fitted(&[0.4, 0.03]), &stage(0.37), &subset).expect("a check");
+    eprintln!("true model, stage zeros fitted: {a:?}");
+    assert_eq!(a.fitted_zeros, indentations);
+    assert_eq!(indentations, 10);
+    // the profiled chi^2 does not see the zeros: equal to round-off (relative 1e-9 of a
+    // chi^2 of ~400 summed from ~400 whitened terms)
+    assert!((a.chi2 - b.chi2).abs() < 1e-9 * a.chi2, "{a:?} vs {b:?}");
+    // the true model's chi^2 is a draw of its distribution: p < 0.01 is a 1 % event
+    assert!(a.p_value >= 0.01, "{a:?}");
+    // friction behind the scale, checked under the scale alone: the travel still rejects
+    let mut with_scale = model.clone();
+    with_scale.included = vec![(candidate(EffectKind::RadiusScale), scale)];
+    let wrong = check(&with_scale, &fitted(&[0.03]), &stage(0.0), &subset).expect("a check");
+    let wrong_exact = check(&with_scale, &fitted(&[0.03]), &exact_zero, &subset).expect("a check");
+    eprintln!("scale only: zeros fitted {wrong:?}, exact zeros {wrong_exact:?}");
+    assert!(wrong.p_value < 0.01, "{wrong:?}");
+}

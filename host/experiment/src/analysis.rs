@@ -59,6 +59,7 @@ pub fn write_curve_and_fit(
             phase: Some(p.phase),
             test: Some(*t),
             h_mm: None,
+            stage_mm: Some(p.stage_mm),
             volume_mm3: None,
         })
         .collect();

@@ -70,6 +70,8 @@ pub struct PairedPoint {
     pub a_mm: f64,
     pub load_n: Option<f64>,
     pub p_air_kpa: f64,
+    /// The stage's position at the frame (interpolated like u_s).
+    pub stage_mm: f64,
     pub phase: Phase,
 }
 
@@ -124,6 +126,7 @@ pub fn pair_frames(
             a_mm: f.a_mm,
             load_n,
             p_air_kpa: lerp(s0.p_air_kpa, s1.p_air_kpa),
+            stage_mm: lerp(s0.stage_mm, s1.stage_mm),
             phase: if t <= turn_us {
                 Phase::Load
             } else {

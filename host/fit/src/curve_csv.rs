@@ -9,8 +9,9 @@
 //! 0.05,1.2,0.01,6,load
 //! ```
 //!
-//! Columns: `u_s_mm`, `a_mm` (required, numbers); `load_n`, `p_air_kpa`, `t_s`, `h_mm`,
-//! `volume_mm3` (optional numbers), `phase` (optional, `load` or `unload`), `test`
+//! Columns: `u_s_mm`, `a_mm` (required, numbers); `load_n`, `p_air_kpa`, `t_s`, `h_mm`
+//! (the tube's travel from first contact), `stage_mm` (the stage's position, zero wherever
+//! the bench's is), `volume_mm3` (optional numbers), `phase` (optional, `load` or `unload`), `test`
 //! (optional, replicate index, a non-negative integer). Optional columns may be left empty
 //! in a row. Blank lines are ignored; comment lines may appear anywhere. Unknown or
 //! duplicated columns are errors, so a misspelt column name is never silently dropped.
@@ -29,6 +30,9 @@ pub struct CurveRow {
     pub phase: Option<Phase>,
     pub test: Option<u32>,
     pub h_mm: Option<f64>,
+    /// The stage's position (mm, towards the sample), its zero the bench's own: the tube
+    /// travel up to the unknown position of first contact.
+    pub stage_mm: Option<f64>,
     pub volume_mm3: Option<f64>,
 }
 
@@ -95,11 +99,12 @@ enum Column {
     Phase,
     Test,
     HMm,
+    StageMm,
     VolumeMm3,
 }
 
 /// Column order used by the writer.
-const COLUMNS: [(Column, &str); 9] = [
+const COLUMNS: [(Column, &str); 10] = [
     (Column::USMm, "u_s_mm"),
     (Column::AMm, "a_mm"),
     (Column::LoadN, "load_n"),
@@ -108,6 +113,7 @@ const COLUMNS: [(Column, &str); 9] = [
     (Column::Phase, "phase"),
     (Column::Test, "test"),
     (Column::HMm, "h_mm"),
+    (Column::StageMm, "stage_mm"),
     (Column::VolumeMm3, "volume_mm3"),
 ];
 
@@ -248,6 +254,7 @@ pub fn parse_curve_csv(text: &str, file: &str) -> Result<CurveCsv, CurveCsvError
                 Column::PAirKpa => row.p_air_kpa = number(false)?,
                 Column::TS => row.t_s = number(false)?,
                 Column::HMm => row.h_mm = number(false)?,
+                Column::StageMm => row.stage_mm = number(false)?,
                 Column::VolumeMm3 => row.volume_mm3 = number(false)?,
                 Column::Phase => {
                     row.phase = match cell {
@@ -318,6 +325,7 @@ pub fn format_curve_csv(curve: &CurveCsv) -> Result<String, CurveCsvError> {
             Column::Phase => r.iter().any(|x| x.phase.is_some()),
             Column::Test => r.iter().any(|x| x.test.is_some()),
             Column::HMm => r.iter().any(|x| x.h_mm.is_some()),
+            Column::StageMm => r.iter().any(|x| x.stage_mm.is_some()),
             Column::VolumeMm3 => r.iter().any(|x| x.volume_mm3.is_some()),
         }
     };
@@ -347,6 +355,7 @@ pub fn format_curve_csv(curve: &CurveCsv) -> Result<String, CurveCsvError> {
                     .unwrap_or_default(),
                 Column::Test => row.test.map(|t| t.to_string()).unwrap_or_default(),
                 Column::HMm => num(row.h_mm),
+                Column::StageMm => num(row.stage_mm),
                 Column::VolumeMm3 => num(row.volume_mm3),
             })
             .collect();

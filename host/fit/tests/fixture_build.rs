@@ -85,6 +85,7 @@ fn build_fit_fixture() {
                 phase: None,
                 test: None,
                 h_mm: Some(pt.h_mm),
+                stage_mm: None,
                 volume_mm3: Some(pt.volume_mm3),
             })
             .collect();

@@ -81,6 +81,7 @@ pub fn generate(
                     load_n: None,
                     t_s: None,
                     h_mm: None,
+                    h_zero_fitted: false,
                 };
                 let e = spec.modulus_kpa;
                 let a = predict(model, cand, e, theta, &pt, Channel::Radius);
