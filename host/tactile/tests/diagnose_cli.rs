@@ -108,6 +108,12 @@ fn json_carries_the_documented_fields_and_names_a_camera_scale() {
     let d = diagnose_json(&file);
     assert_eq!(d["verdict"], "effect", "{d:#}");
     assert_eq!(d["effect"], "radius_scale");
+    // the stage's position is checked as the travel with each indentation's zero fitted:
+    // five replicates at each of two pressures; a camera scale leaves the travel alone,
+    // so the named model's passes (p < 0.01 would be a 1 % event)
+    let travel = &d["forward"]["travel"];
+    assert_eq!(travel["fitted_zeros"], 10, "{travel:#}");
+    assert!(travel["p_value"].as_f64().expect("p") >= 0.01, "{travel:#}");
     assert!(d["alternatives"].is_array());
     assert!(
         d["confidence"]
@@ -223,7 +229,9 @@ fn without_replicates_the_noise_model_is_assumed_and_said_so() {
 }
 
 /// A record folder as `tactile measure` writes it: `curve.csv` with the manometer's reading
-/// on every row (scattered around the set point) and `meta.json` with the plan.
+/// on every row (scattered around the set point) and the stage's position in place of the
+/// travel (first contact at 0.8 mm plus a few um that differ between replicates), and
+/// `meta.json` with the plan.
 fn write_record(dir: &Path, curve: &fit::curve_csv::CurveCsv, pressure_kpa: f64, seed: u64) {
     use experiment::IndentationPlan;
     use experiment::calibration::CalibrationRecord;
@@ -241,6 +249,8 @@ fn write_record(dir: &Path, curve: &fit::curve_csv::CurveCsv, pressure_kpa: f64,
             .wrapping_add(1442695040888963407);
         row.p_air_kpa =
             Some(pressure_kpa + 0.1 * ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5));
+        let contact_mm = 0.8 + 0.003 * f64::from(row.test.unwrap_or(0));
+        row.stage_mm = row.h_mm.take().map(|h| h + contact_mm);
     }
     let measured = fit::curve_csv::CurveCsv {
         metadata: Vec::new(),
@@ -325,6 +335,12 @@ fn record_folders_at_two_pressures_are_diagnosed_like_their_curves() {
     // the records' nominal pressures, not the scattered manometer readings, group the data
     assert_eq!(d["verdict"], "effect", "{d:#}");
     assert_eq!(d["effect"], "radius_scale");
+    // the stage's position is checked as the travel with each indentation's zero fitted:
+    // five replicates at each of two pressures; a camera scale leaves the travel alone,
+    // so the named model's passes (p < 0.01 would be a 1 % event)
+    let travel = &d["forward"]["travel"];
+    assert_eq!(travel["fitted_zeros"], 10, "{travel:#}");
+    assert!(travel["p_value"].as_f64().expect("p") >= 0.01, "{travel:#}");
 
     // a record still running has no curve to diagnose: named, exit 2
     let running = dir.join("record-6").join("meta.json");
