@@ -91,16 +91,7 @@ impl Mesh {
         body: usize,
         position: impl Fn(usize, usize) -> [f64; 2],
     ) -> Block {
-        let block = Block {
-            node_offset: self.nodes.len(),
-            n1,
-            n2,
-        };
-        for j in 0..n2 {
-            for i in 0..n1 {
-                self.nodes.push(position(i, j));
-            }
-        }
+        let block = self.add_grid_nodes(n1, n2, position);
         for ej in 0..(n2 - 1) / 2 {
             for ei in 0..(n1 - 1) / 2 {
                 let mut nodes = [0; 9];
@@ -109,13 +100,7 @@ impl Mesh {
                         nodes[3 * jj + ii] = block.node(2 * ei + ii, 2 * ej + jj);
                     }
                 }
-                if self.parent_jacobian(&nodes) < 0.0 {
-                    // mirror the first parent direction
-                    for jj in 0..3 {
-                        nodes.swap(3 * jj, 3 * jj + 2);
-                    }
-                }
-                self.elements.push(MeshElement { nodes, body });
+                self.push_oriented(nodes, body);
             }
         }
         block
@@ -135,16 +120,7 @@ impl Mesh {
         along: &[f64],
         coarsening: &Coarsening,
     ) -> Block {
-        let block = Block {
-            node_offset: self.nodes.len(),
-            n1,
-            n2,
-        };
-        for j in 0..n2 {
-            for i in 0..n1 {
-                self.nodes.push(position(i, j));
-            }
-        }
+        let block = self.add_grid_nodes(n1, n2, position);
         // (index p across the coarsened direction, index q along it) -> grid node
         let first = coarsening.direction == GridDirection::First;
         let at = |p: usize, q: usize| {
@@ -174,12 +150,7 @@ impl Mesh {
                             nodes[3 * b + a] = at(2 * e + pp, q0 + qq * step);
                         }
                     }
-                    if self.parent_jacobian(&nodes) < 0.0 {
-                        for b in 0..3 {
-                            nodes.swap(3 * b, 3 * b + 2);
-                        }
-                    }
-                    self.elements.push(MeshElement { nodes, body });
+                    self.push_oriented(nodes, body);
                 }
                 if !fine && count > 1 {
                     let qs = [2 * start, 2 * start + count, 2 * (start + count)];
@@ -204,6 +175,37 @@ impl Mesh {
             }
         }
         block
+    }
+
+    /// Append the nodes of an n1 x n2 grid, node (i, j) at `position(i, j)`.
+    fn add_grid_nodes(
+        &mut self,
+        n1: usize,
+        n2: usize,
+        position: impl Fn(usize, usize) -> [f64; 2],
+    ) -> Block {
+        let block = Block {
+            node_offset: self.nodes.len(),
+            n1,
+            n2,
+        };
+        for j in 0..n2 {
+            for i in 0..n1 {
+                self.nodes.push(position(i, j));
+            }
+        }
+        block
+    }
+
+    /// Append an element, its first parent direction mirrored if its Jacobian would be
+    /// negative.
+    fn push_oriented(&mut self, mut nodes: [usize; 9], body: usize) {
+        if self.parent_jacobian(&nodes) < 0.0 {
+            for jj in 0..3 {
+                nodes.swap(3 * jj, 3 * jj + 2);
+            }
+        }
+        self.elements.push(MeshElement { nodes, body });
     }
 
     fn parent_jacobian(&self, nodes: &[usize; 9]) -> f64 {

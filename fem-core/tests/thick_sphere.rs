@@ -36,16 +36,7 @@ fn inflate_sphere_with(
     ramp_steps: usize,
 ) -> (f64, f64) {
     let mut mesh = Mesh::default();
-    let shell = add_shell(
-        &mut mesh,
-        &ShellGeometry {
-            inner_radius_mm: 4.6,
-            outer_radius_mm: 5.0,
-            skirt_length_mm: 0.0,
-        },
-        &divisions,
-        0,
-    );
+    let shell = add_shell(&mut mesh, &SPHERE, &divisions, 0);
     let mut model = Model::new(mesh, vec![material], formulation);
     let mut fixed: Vec<usize> = shell.axis.iter().map(|&n| 2 * n).collect();
     fixed.extend(shell.equator.iter().map(|&n| 2 * n + 1));
@@ -67,6 +58,13 @@ fn inflate_sphere_with(
     );
     (u[2 * inner], u[2 * outer])
 }
+
+/// The sensor's wall as a hemisphere without skirt.
+const SPHERE: ShellGeometry = ShellGeometry {
+    inner_radius_mm: 4.6,
+    outer_radius_mm: 5.0,
+    skirt_length_mm: 0.0,
+};
 
 const COARSE: ShellDivisions = ShellDivisions {
     arc: 8,
@@ -313,11 +311,7 @@ fn coarsened_sphere(law: MaterialLaw, nu: f64) -> (Model, fem_core::mesh::ShellM
     let mut mesh = Mesh::default();
     let shell = add_shell_coarsened(
         &mut mesh,
-        &ShellGeometry {
-            inner_radius_mm: 4.6,
-            outer_radius_mm: 5.0,
-            skirt_length_mm: 0.0,
-        },
+        &SPHERE,
         &divisions,
         &arc_edges,
         Some(&coarsening),

@@ -24,15 +24,16 @@ fn candidate(kind: EffectKind) -> Candidate {
     }
 }
 
-#[test]
-fn the_travel_accepts_the_true_model_and_prefers_it_to_a_manometer_offset_in_place_of_friction() {
-    let (base, effects) = shipped_tables().expect("shipped tables");
-    let model = Model::new(&base, &effects).expect("model");
-    let (mu, scale) = (0.4, 0.03);
+/// The truth of this file's tests: friction behind a camera scale.
+const MU: f64 = 0.4;
+const SCALE: f64 = 0.03;
+
+/// The true model (the tables' with [`MU`] and [`SCALE`]), its modulus and its data.
+fn friction_behind_a_scale<'a>(model: &Model<'a>) -> (Model<'a>, f64, Vec<diagnosis::data::Point>) {
     let mut truth = model.clone();
     truth.included = vec![
-        (candidate(EffectKind::Friction), mu),
-        (candidate(EffectKind::RadiusScale), scale),
+        (candidate(EffectKind::Friction), MU),
+        (candidate(EffectKind::RadiusScale), SCALE),
     ];
     let spec = SyntheticSpec {
         white_u_mm: 0.003,
@@ -40,8 +41,16 @@ fn the_travel_accepts_the_true_model_and_prefers_it_to_a_manometer_offset_in_pla
         seed: 5,
         ..SyntheticSpec::default()
     };
-    let e = spec.modulus_kpa;
-    let pts = generate(&truth, None, |_| 0.0, &spec);
+    let points = generate(&truth, None, |_| 0.0, &spec);
+    (truth, spec.modulus_kpa, points)
+}
+
+#[test]
+fn the_travel_accepts_the_true_model_and_prefers_it_to_a_manometer_offset_in_place_of_friction() {
+    let (base, effects) = shipped_tables().expect("shipped tables");
+    let model = Model::new(&base, &effects).expect("model");
+    let (mu, scale) = (MU, SCALE);
+    let (truth, e, pts) = friction_behind_a_scale(&model);
     let subset: Vec<usize> = (0..pts.len()).collect();
     let exact = FittedCovariance::default();
     let truth_fitted = FittedModel {
@@ -114,20 +123,8 @@ fn the_travel_accepts_the_true_model_and_prefers_it_to_a_manometer_offset_in_pla
 fn a_stage_position_with_unknown_zeros_is_checked_with_one_fitted_zero_per_replicate() {
     let (base, effects) = shipped_tables().expect("shipped tables");
     let model = Model::new(&base, &effects).expect("model");
-    let (mu, scale) = (0.4, 0.03);
-    let mut truth = model.clone();
-    truth.included = vec![
-        (candidate(EffectKind::Friction), mu),
-        (candidate(EffectKind::RadiusScale), scale),
-    ];
-    let spec = SyntheticSpec {
-        white_u_mm: 0.003,
-        offset_u_mm: 0.002,
-        seed: 5,
-        ..SyntheticSpec::default()
-    };
-    let e = spec.modulus_kpa;
-    let exact_zero = generate(&truth, None, |_| 0.0, &spec);
+    let scale = SCALE;
+    let (truth, e, exact_zero) = friction_behind_a_scale(&model);
     // the stage's own zero: several mm away from first contact, another for each replicate
     let stage = |shift: f64| -> Vec<diagnosis::data::Point> {
         exact_zero
