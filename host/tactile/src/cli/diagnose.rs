@@ -19,7 +19,7 @@ use std::time::Instant;
 
 #[derive(Debug, Args)]
 pub struct DiagnoseArgs {
-    /// Measured curves (CSV: u_s_mm,a_mm[,load_n,p_air_kpa,t_s,h_mm,phase,test]) or record
+    /// Measured curves (CSV: u_s_mm,a_mm[,load_n,p_air_kpa,t_s,h_mm,stage_mm,phase,test]) or record
     /// folders of `tactile measure`, `tactile demo` or the daemon; one or more pressures,
     /// replicates marked by the `test` column (a record's indentation cycles) or one file per
     /// replicate.
