@@ -334,7 +334,7 @@ pub fn add_shell_with_arc_edges(
 
 /// [`add_shell_with_arc_edges`] with the coarser elements of `coarsening` (the first grid
 /// direction runs along the arc and the skirt, the second through the wall from the inner
-/// surface; along the first the groups' elements must be of equal polar angle).
+/// surface; merged groups need equal fine elements, in polar angle along the arc).
 pub fn add_shell_coarsened(
     mesh: &mut Mesh,
     geometry: &ShellGeometry,
@@ -368,8 +368,16 @@ pub fn add_shell_coarsened(
     let block = match coarsening {
         None => mesh.add_block(n1, n2, body, position),
         Some(c) => {
+            // the grid coordinates the elements are quadratic in: along the arc the polar
+            // angle, then the skirt's node index (uniform); through the wall the node index
             let along: Vec<f64> = match c.direction {
-                GridDirection::First => (0..n1).map(|i| i as f64).collect(),
+                GridDirection::First => (0..n1)
+                    .map(|i| {
+                        phis.get(i).copied().unwrap_or_else(|| {
+                            std::f64::consts::FRAC_PI_2 + (i + 1 - n_arc_nodes) as f64
+                        })
+                    })
+                    .collect(),
                 GridDirection::Second => (0..n2).map(|j| j as f64).collect(),
             };
             mesh.add_block_coarsened(n1, n2, body, position, &along, c)
@@ -688,6 +696,61 @@ mod tests {
             .filter(|&&b| !(1.7 - 0.8..=2.3 + 0.8).contains(&b))
         {
             assert!(e.contains(kept), "base edge {kept} kept");
+        }
+    }
+
+    #[test]
+    fn hanging_nodes_interpolate_quadratics_along_either_direction() {
+        // a 4 x 4 element block, coarse outside its first element line, groups of 2 and 2
+        // merged, the groups of unequal size (uniform inside each, as a merged element's
+        // middle node must be at its middle); every hanging node must carry a field
+        // quadratic in the coarsened coordinate exactly (its coarse element's edge), and
+        // its masters must be nodes no constraint moves
+        let x1 = [0.0, 0.1, 0.2, 0.3, 0.4, 0.6, 0.8, 1.0, 1.2];
+        let x2 = [0.0, 0.05, 0.1, 0.15, 0.2, 0.35, 0.5, 0.65, 0.8];
+        for direction in [GridDirection::First, GridDirection::Second] {
+            let along: &[f64] = if direction == GridDirection::First {
+                &x1
+            } else {
+                &x2
+            };
+            let mut mesh = Mesh::default();
+            let coarsening = Coarsening {
+                direction,
+                fine: vec![true, false, false, false],
+                groups: vec![2, 2],
+            };
+            mesh.add_block_coarsened(9, 9, 0, |i, j| [1.0 + x1[i], x2[j]], along, &coarsening);
+            // one fine line of 4 elements, three coarse lines of 2
+            assert_eq!(mesh.elements.len(), 4 + 3 * 2, "{direction:?}");
+            assert!(
+                mesh.elements
+                    .iter()
+                    .all(|e| mesh.parent_jacobian(&e.nodes) > 0.0)
+            );
+            // the nodes at odd positions between the coarse nodes of three coarse lines
+            // (7 positions across, 4 along each): 28 hanging
+            assert_eq!(mesh.hanging.len(), 7 * 4, "{direction:?}");
+            let coordinate = |n: usize| {
+                let [r, z] = mesh.nodes[n];
+                if direction == GridDirection::First {
+                    r - 1.0
+                } else {
+                    z
+                }
+            };
+            let f = |x: f64| 0.3 - 2.0 * x + 1.7 * x * x;
+            for h in &mesh.hanging {
+                let weights: f64 = h.masters.iter().map(|&(_, w)| w).sum();
+                assert!((weights - 1.0).abs() < 1e-12);
+                let v: f64 = h.masters.iter().map(|&(m, w)| w * f(coordinate(m))).sum();
+                assert!((v - f(coordinate(h.node))).abs() < 1e-12, "{direction:?}");
+                assert!(
+                    h.masters
+                        .iter()
+                        .all(|&(m, _)| mesh.hanging.iter().all(|o| o.node != m))
+                );
+            }
         }
     }
 

@@ -89,7 +89,8 @@ pub struct EdgeWindow {
     pub depth_size_mm: f64,
     /// Ratio of neighbouring element sizes away from the band.
     pub growth: f64,
-    /// The wall's and the depth's fine divisions only under the band (see
+    /// The band's wall division only near it and its radial element size only in the
+    /// sample's top layer, the production mesh's elsewhere (see
     /// [`EdgeBand::coarse_outside`]).
     pub coarse_outside: bool,
 }
@@ -262,7 +263,7 @@ impl SolverSettings {
 
 /// How far beyond the band (mm, along the shell's surface) its wall division reaches when
 /// the mesh is coarse outside it ([`EdgeBand::coarse_outside`]; 0.6 mm moved a by under
-/// 0.01 um on the rigid plate).
+/// 0.05 um on the rigid plate).
 pub const BAND_COARSE_MARGIN_MM: f64 = 0.3;
 
 /// Depth (mm) of the sample's top layer whose elements keep the band's radial size when

@@ -18,7 +18,8 @@ pub struct Point {
     /// The tube's travel from first contact (mm), where the data record it.
     pub h_mm: Option<f64>,
     /// `h_mm` is a stage position whose zero, the stage at first contact, is not known:
-    /// the travel check fits it per replicate ([`crate::travel`]).
+    /// the travel check fits it per indentation, a replicate at one pressure
+    /// ([`crate::travel`]).
     pub h_zero_fitted: bool,
 }
 

@@ -25,14 +25,15 @@
 //!
 //! A bench record holds the stage's position, not the travel: its zero, the stage where
 //! the shell first touches the sample, is not measured ([`Point::h_zero_fitted`]). Each
-//! such replicate's zero is then a free offset c_t: with Q = I - V (I + V^T V)^-1 V^T (the
-//! whitened inverse covariance above) and Z the whitened indicators of those replicates,
-//! the offsets are profiled out,
+//! such indentation's zero (a replicate at one pressure: the inflated apex meets the
+//! sample at another stage position at each) is then a free offset c_t: with
+//! Q = I - V (I + V^T V)^-1 V^T (the whitened inverse covariance above) and Z the whitened
+//! indicators of those indentations, the offsets are profiled out,
 //!
 //! chi^2 = w^T Q w - (Z^T Q w)^T (Z^T Q Z)^-1 (Z^T Q w),
 //!
 //! on as many degrees of freedom as values less one per fitted zero (the residuals minus
-//! each replicate's mean also feed the noise model, whose own offsets the zeros absorb).
+//! each indentation's mean also feed the noise model, whose own offsets the zeros absorb).
 
 use serde::Serialize;
 
