@@ -122,7 +122,7 @@ fn truth_minus_table_per_step() {
 fn loo_calibration() {
     use diagnosis::model::Channel;
     use diagnosis::model::Model;
-    use diagnosis::noise_model::{table_error_knots, table_error_scale, table_error_sigma};
+    use diagnosis::noise_model::{table_error_knots_of, table_error_scale, table_error_sigma};
     let t = read_effect_table(&tables_dir().join(EffectAxis::Thickness.file_name()))
         .expect("measurement setup");
     let converged = std::env::var_os("DIAG_CONVERGED").is_some();
@@ -146,6 +146,20 @@ fn loo_calibration() {
             .map(|k| (nodes[k] * nodes[k + 1]).sqrt())
             .collect()
     });
+    // `LOO_CHANNEL=load|travel` measures that channel instead of the contact radius (the
+    // assertions below are about the radius)
+    let channel = match std::env::var("LOO_CHANNEL").as_deref() {
+        Ok("load") => Channel::Load,
+        Ok("travel") => Channel::Travel,
+        Ok("radius") | Err(_) => Channel::Radius,
+        Ok(other) => panic!("LOO_CHANNEL: radius, load or travel, not {other}"),
+    };
+    let truth_value = |q: &fem_core::CurvePoint| match channel {
+        Channel::Radius => q.a_mm,
+        Channel::Load => q.load_n,
+        Channel::Travel => q.h_mm,
+    };
+    let unit = if channel == Channel::Load { "N" } else { "mm" };
     let (mut sd, mut sl, mut lag, mut lag0) = (0.0, 0.0, 0.0, 0.0);
     let mut z2 = Vec::new();
     // truth minus table per (modulus, pressure) keyed by the load step's travel h (in
@@ -161,14 +175,14 @@ fn loo_calibration() {
             let Some((lo, hi)) = model.base.u_s_range_mm(e, p) else {
                 continue;
             };
-            let (knots, loo_rms) = table_error_knots(&model, e, p);
+            let (knots, loo_rms) = table_error_knots_of(&model, channel, e, p);
             let mut d = Vec::new();
             let (mut ed, mut el) = (0.0, 0.0);
             for q in c.points.iter().filter(|q| q.a_mm > 0.0) {
                 if q.u_s_mm < lo || q.u_s_mm > hi {
                     continue;
                 }
-                let diff = q.a_mm - model.base.sample(e, p, q.u_s_mm).a_mm;
+                let diff = truth_value(q) - channel.of(&model.base.sample(e, p, q.u_s_mm));
                 by_step.push((e, p, (q.h_mm * 1e6).round() as i64, diff));
                 // the knot nearest to the step (the knots are the steps' u_s interpolated
                 // between the nodes)
@@ -183,7 +197,7 @@ fn loo_calibration() {
                 d.push(diff);
                 ed += diff * diff;
                 el += loo * loo;
-                let sigma = table_error_sigma(&model, Channel::Radius, e, loo);
+                let sigma = table_error_sigma(&model, channel, e, loo);
                 if sigma > 0.0 {
                     z2.push((diff / sigma).powi(2));
                 }
@@ -197,7 +211,7 @@ fn loo_calibration() {
             sd += ed;
             sl += el;
             println!(
-                "E2 {e:7.2} p {p:4.1}: truth-table RMS {:.4} mm, LOO RMS {:.4} mm, ratio {:.2} (scale {:.2}; {} steps; lag-1 correlation {:+.2})",
+                "E2 {e:7.2} p {p:4.1}: truth-table RMS {:.5} {unit}, LOO RMS {:.5} {unit}, ratio {:.2} (scale {:.2}; {} steps; lag-1 correlation {:+.2})",
                 (ed / d.len().max(1) as f64).sqrt(),
                 (el / d.len().max(1) as f64).sqrt(),
                 (ed / el.max(1e-30)).sqrt(),
@@ -234,7 +248,7 @@ fn loo_calibration() {
     // below 1 but not far below: under 0.25 the term would be inflated ~2x in sigma
     // everywhere, over 1 it would underweight the table error on average
     let mean_z2 = z2.iter().sum::<f64>() / z2.len() as f64;
-    if chosen.is_some() {
+    if chosen.is_some() || channel != Channel::Radius {
         return;
     }
     if converged {
