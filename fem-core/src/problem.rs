@@ -1268,13 +1268,7 @@ impl Indentation {
             .map(|(h_prev, u_prev)| (*h_prev, self.carried_over(old, u_prev)));
         self.set_tube_travel(h_mm);
         self.model.apply_prescribed(&mut u_new);
-        let current: Vec<Vec<f64>> = old
-            .model
-            .contacts
-            .iter()
-            .map(|c| c.multipliers.clone())
-            .collect();
-        let carried = self.carried_multipliers(old, &current);
+        let carried = self.carried_multipliers(old, &old.saved_multipliers());
         for (new, m) in self.model.contacts.iter_mut().zip(carried) {
             new.multipliers = m;
         }
@@ -1728,12 +1722,7 @@ pub(crate) fn solve_stages(
                     moved.model.newton.max_iterations = BAND_MOVE_ITERATIONS;
                     let mut moved_state = moved.take_over(ind, &state, h_from);
                     let carried = moved_state.clone();
-                    let carried_multipliers: Vec<Vec<f64>> = moved
-                        .model
-                        .contacts
-                        .iter()
-                        .map(|c| c.multipliers.clone())
-                        .collect();
+                    let carried_multipliers = moved.saved_multipliers();
                     let result =
                         moved.solve_step(&mut moved_state, h_from, params.pressure_kpa, &next);
                     if result.is_ok() {
