@@ -122,7 +122,7 @@ fn truth_minus_table_per_step() {
 fn loo_calibration() {
     use diagnosis::model::Channel;
     use diagnosis::model::Model;
-    use diagnosis::noise_model::{table_error_knots_of, table_error_scale, table_error_sigma};
+    use diagnosis::noise_model::{table_error_knots_of, table_error_sigma};
     let t = read_effect_table(&tables_dir().join(EffectAxis::Thickness.file_name()))
         .expect("measurement setup");
     let converged = std::env::var_os("DIAG_CONVERGED").is_some();
@@ -159,6 +159,7 @@ fn loo_calibration() {
         Channel::Load => q.load_n,
         Channel::Travel => q.h_mm,
     };
+    println!("channel: {channel:?}");
     let unit = if channel == Channel::Load { "N" } else { "mm" };
     let (mut sd, mut sl, mut lag, mut lag0) = (0.0, 0.0, 0.0, 0.0);
     let mut z2 = Vec::new();
@@ -215,7 +216,8 @@ fn loo_calibration() {
                 (ed / d.len().max(1) as f64).sqrt(),
                 (el / d.len().max(1) as f64).sqrt(),
                 (ed / el.max(1e-30)).sqrt(),
-                table_error_scale(&model, e),
+                // the channel's scale (its floor is negligible next to 1 mm)
+                table_error_sigma(&model, channel, e, 1.0),
                 d.len(),
                 lag_curve / ed.max(1e-30)
             );
@@ -235,7 +237,7 @@ fn loo_calibration() {
     );
     z2.sort_by(f64::total_cmp);
     println!(
-        "overall: RMS ratio truth-table / LOO = {:.3} (scale per modulus: table_error_scale); lag-1 correlation of truth-table {:.2}; \
+        "overall: RMS ratio truth-table / LOO = {:.3} (scale per modulus: noise_model::table_error_sigma); lag-1 correlation of truth-table {:.2}; \
          mean (diff / sigma)^2 (sigma: scaled LOO with the floor) = {:.2}, median {:.2} over {} steps",
         (sd / sl).sqrt(),
         lag / lag0,
@@ -333,8 +335,16 @@ fn pressure_continuation_error() {
             // 15 kPa it is the converged table's own chord (0.0008 / 0.0003 mm against
             // 0.018 / 0.0059 mm at 13.5 / 14.5 kPa, 0.04-0.05 of the effect). The bounds
             // guard those shares.
+            // A converged table cannot be checked below its solves' own path dependence
+            // (the noise model's floor, ~1 um): at 14.5 kPa the table rebuilt with other
+            // load steps gave 0.0006 mm against an effect of 0.0060 mm.
             let share = if converged && p_true < 6.0 { 0.5 } else { 0.1 };
-            if e == 146.8 && rms_err >= share * rms_eff {
+            let floor = if converged {
+                diagnosis::noise_model::CONVERGED_LUT_ERROR_FLOOR_MM
+            } else {
+                0.0
+            };
+            if e == 146.8 && rms_err >= (share * rms_eff).max(floor) {
                 failures.push(format!(
                     "E2 {e} p {p_true}: {rms_err:.4} vs effect {rms_eff:.4} mm"
                 ));
