@@ -155,6 +155,7 @@ impl Mesh {
                 if !fine && count > 1 {
                     let qs = [2 * start, 2 * start + count, 2 * (start + count)];
                     let (x0, x2) = (along[qs[0]], along[qs[2]]);
+                    assert_exact_group(along, qs);
                     for p in 2 * e..=2 * e + 2 {
                         for q in qs[0] + 1..qs[2] {
                             let node = at(p, q);
@@ -655,6 +656,38 @@ pub fn add_sample_coarsened(
     }
 }
 
+/// The hanging constraints of a merged group `qs` (first, middle and last grid index along
+/// the coarsened direction) are exact only if the coarse element's middle node lies at the
+/// middle of its ends and every fine element inside it has its middle node at its middle,
+/// in the coordinate `along` the elements are quadratic in: each fine edge is then an
+/// affine piece of the coarse edge, which reproduces its quadratic. A layout that breaks
+/// this would give inexact constraint weights silently, so it is refused here (the callers
+/// build the groups themselves: this is a broken invariant, not bad input).
+fn assert_exact_group(along: &[f64], qs: [usize; 3]) {
+    let (x0, x2) = (along[qs[0]], along[qs[2]]);
+    // round-off of the callers' coordinates (polar angles, radii) is ~1e-15 of the group;
+    // 1e-9 of it moves a hanging node's weight by no more than that
+    let tol = 1e-9 * (x2 - x0).abs();
+    let middle_ok = |a: f64, m: f64, b: f64| (m - 0.5 * (a + b)).abs() <= tol;
+    assert!(
+        middle_ok(x0, along[qs[1]], x2),
+        "merged group at grid index {}..{}: its middle node ({}) is not at the middle of \
+         {x0} and {x2}; merged groups need fine elements of equal size",
+        qs[0],
+        qs[2],
+        along[qs[1]]
+    );
+    for q in (qs[0]..qs[2]).step_by(2) {
+        assert!(
+            middle_ok(along[q], along[q + 1], along[q + 2]),
+            "merged group at grid index {}..{}: the fine element at {q} has its middle node \
+             off its middle",
+            qs[0],
+            qs[2]
+        );
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -697,6 +730,20 @@ mod tests {
         {
             assert!(e.contains(kept), "base edge {kept} kept");
         }
+    }
+
+    #[test]
+    #[should_panic(expected = "merged groups need fine elements of equal size")]
+    fn a_merged_group_of_unequal_fine_elements_is_refused() {
+        // the second group merges fine elements of 0.2 and 0.4: its coarse middle node
+        // (0.6) is not at the middle of 0.4 and 1.2, so its hanging weights would be inexact
+        let x = [0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.9, 1.2];
+        let coarsening = Coarsening {
+            direction: GridDirection::First,
+            fine: vec![true, false, false, false],
+            groups: vec![2, 2],
+        };
+        Mesh::default().add_block_coarsened(9, 9, 0, |i, j| [1.0 + x[i], x[j]], &x, &coarsening);
     }
 
     #[test]
