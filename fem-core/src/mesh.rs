@@ -747,6 +747,20 @@ mod tests {
     }
 
     #[test]
+    #[should_panic(expected = "has its middle node off its middle")]
+    fn a_fine_element_whose_middle_node_is_off_its_middle_is_refused() {
+        // one merged group of two fine elements: the coarse middle node (0.2) is at the
+        // middle of 0 and 0.4, but the first fine element's middle node is at 0.15, not 0.1
+        let x = [0.0, 0.15, 0.2, 0.3, 0.4];
+        let coarsening = Coarsening {
+            direction: GridDirection::First,
+            fine: vec![true, false],
+            groups: vec![2],
+        };
+        Mesh::default().add_block_coarsened(5, 5, 0, |i, j| [1.0 + x[i], x[j]], &x, &coarsening);
+    }
+
+    #[test]
     fn hanging_nodes_interpolate_quadratics_along_either_direction() {
         // a 4 x 4 element block, coarse outside its first element line, groups of 2 and 2
         // merged, the groups of unequal size (uniform inside each, as a merged element's

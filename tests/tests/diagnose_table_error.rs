@@ -162,9 +162,8 @@ fn loo_calibration() {
     println!("channel: {channel:?}");
     let unit = if channel == Channel::Load { "N" } else { "mm" };
     let (mut sd, mut sl, mut lag, mut lag0) = (0.0, 0.0, 0.0, 0.0);
-    let mut z2 = Vec::new();
     // the standardised steps with where they are: (z^2, E2, p_air, h, u_s, diff, sigma)
-    let mut worst: Vec<(f64, f64, f64, f64, f64, f64, f64)> = Vec::new();
+    let mut steps: Vec<(f64, f64, f64, f64, f64, f64, f64)> = Vec::new();
     // truth minus table per (modulus, pressure) keyed by the load step's travel h (in
     // 1e-6 mm): their correlation across the two pressures at equal h
     let mut by_step: Vec<(f64, f64, i64, f64)> = Vec::new();
@@ -203,8 +202,7 @@ fn loo_calibration() {
                 let sigma = table_error_sigma(&model, channel, e, loo);
                 if sigma > 0.0 {
                     let z = (diff / sigma).powi(2);
-                    z2.push(z);
-                    worst.push((z, e, p, q.h_mm, q.u_s_mm, diff, sigma));
+                    steps.push((z, e, p, q.h_mm, q.u_s_mm, diff, sigma));
                 }
             }
             let mut lag_curve = 0.0;
@@ -239,9 +237,10 @@ fn loo_calibration() {
         "correlation of truth - table between 6 and 15 kPa at equal travel: {:.2}",
         s67 / (s66 * s77).sqrt().max(1e-30)
     );
-    z2.sort_by(f64::total_cmp);
-    worst.sort_by(|a, b| b.0.total_cmp(&a.0));
-    for &(z, e, p, h, u, diff, sigma) in worst.iter().take(8) {
+    // largest first
+    steps.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let z2: Vec<f64> = steps.iter().rev().map(|s| s.0).collect(); // ascending
+    for &(z, e, p, h, u, diff, sigma) in steps.iter().take(8) {
         println!(
             "largest (diff / sigma)^2 {z:8.1}: E2 {e:7.2} p {p:4.1} h {h:.4} mm u_s {u:.4} mm, truth-table {:+.5} {unit}, sigma {:.5} {unit}",
             diff, sigma
