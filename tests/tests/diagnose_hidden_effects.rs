@@ -99,7 +99,7 @@ fn camera_radius_offset_is_named_and_the_gap_shrinks() {
 }
 
 #[test]
-#[ignore = "about 16 min in release (converged truths, level-1 effect solves); cargo test --release -p system-tests --test diagnose_hidden_effects -- --ignored --nocapture"]
+#[ignore = "about 16 min in release (converged truths, level-1 friction solves); cargo test --release -p system-tests --test diagnose_hidden_effects -- --ignored --nocapture"]
 fn every_effect_at_a_clear_size_is_named_and_the_gap_shrinks() {
     // every effect is checked (a failure is reported, not the end of the run)
     // HIDDEN_EFFECTS=name,name runs only those effects (with their usual seeds)

@@ -1,4 +1,4 @@
-//! How far the baseline effect table is from the solver it was built with: the simulated
+//! How far a baseline table is from the solver it was built with: the simulated
 //! truth of the diagnosis tests is a direct fem-core solve at an off-grid modulus, the
 //! diagnosis reads the table interpolated in ln E2 (PCHIP) and u_s (PCHIP). This measures,
 //! per load step, truth minus table at the truth's (E2, p_air, u_s), and, at the table's own
@@ -7,15 +7,15 @@
 //!
 //! `cargo test --release -p system-tests --test diagnose_table_error -- --ignored --nocapture`
 //! (`DIAG_TABLES=DIR` reads the tables from DIR instead of the shipped ones, e.g. tables
-//! rebuilt with `tactile diagnose --build-tables DIR`). These measure the effect tables'
-//! base slice (production mesh, no edge band) against solves at its settings; `loo_calibration` with `DIAG_CONVERGED=1`
+//! rebuilt with `tactile diagnose --build-tables DIR`). These measure the production table
+//! (`default.lut`: the production mesh, no edge band) against solves at its settings; `loo_calibration` with `DIAG_CONVERGED=1`
 //! measures the diagnosis's converged baseline (`default-fine.lut`) against converged
 //! solves (the edge band), as the simulated truth is made.
 
 use diagnosis::model::Surface;
 use diagnosis::tables::{
-    EFFECT_MAX_DEPTH_MM, EFFECT_STEPS, EffectAxis, coarse_baseline, converged_baseline,
-    effect_base_params, read_effect_table, shipped_tables_dir,
+    EFFECT_MAX_DEPTH_MM, EFFECT_STEPS, EffectAxis, converged_baseline, effect_base_params,
+    production_baseline, read_effect_table, shipped_tables_dir,
 };
 use fem_core::{Curve, CurveParams, solve_curve};
 
@@ -82,9 +82,7 @@ fn compare(base: &Surface<'_>, e: f64, p: f64) -> f64 {
 #[test]
 #[ignore = "measurement (fem-core solves, ~1 min in release); run with --release -- --ignored --nocapture"]
 fn truth_minus_table_per_step() {
-    let t = read_effect_table(&tables_dir().join(EffectAxis::Thickness.file_name()))
-        .expect("measurement setup");
-    let lut = coarse_baseline(std::slice::from_ref(&t)).expect("measurement setup");
+    let lut = production_baseline().expect("measurement setup");
     let base =
         Surface::new(&lut, &fem_core::lut::EffectSelection::default()).expect("measurement setup");
     // staleness: at a table node the interpolation in E2 is exact, so a direct solve must
@@ -123,13 +121,11 @@ fn loo_calibration() {
     use diagnosis::model::Channel;
     use diagnosis::model::Model;
     use diagnosis::noise_model::{table_error_knots_of, table_error_sigma};
-    let t = read_effect_table(&tables_dir().join(EffectAxis::Thickness.file_name()))
-        .expect("measurement setup");
     let converged = std::env::var_os("DIAG_CONVERGED").is_some();
     let lut = if converged {
         converged_baseline().expect("measurement setup")
     } else {
-        coarse_baseline(std::slice::from_ref(&t)).expect("measurement setup")
+        production_baseline().expect("measurement setup")
     };
     let model = Model::new(&lut, &[]).expect("measurement setup");
     let nodes = lut.grid.modulus_kpa.clone();
@@ -292,7 +288,7 @@ fn pressure_continuation_error() {
     let lut = if converged {
         converged_baseline().expect("measurement setup")
     } else {
-        coarse_baseline(std::slice::from_ref(&t)).expect("measurement setup")
+        production_baseline().expect("measurement setup")
     };
     let effects = [t.clone()];
     let model = Model::new(&lut, &effects).expect("measurement setup");

@@ -1,10 +1,9 @@
 //! Hidden-effect data for tests and the confusion matrix, from hil-sim's plant in simulated
 //! time: the contact mechanics are direct fem-core solves at the sample's true parameters
-//! ([`truth_curves`]: a converged solve of the sample at the truth's off-grid modulus and
-//! true internal pressure, plus a real thinner layer, real friction or the Yeoh
-//! stiffening law as the difference of two solves one mesh level finer than the effect
-//! tables) read by
-//! hil-sim's curve mechanics; the history and measurement effects are hil-sim's own code (`effects::EffectState` for
+//! ([`truth_curves`]: a converged solve of the sample as it is, a thinner layer or the Yeoh
+//! stiffening law included, at the truth's off-grid modulus and true internal pressure,
+//! plus real friction as the difference of two solves one mesh level finer than the
+//! friction table) read by hil-sim's curve mechanics; the history and measurement effects are hil-sim's own code (`effects::EffectState` for
 //! viscoelastic relaxation and adhesion, `EffectsConfig::camera_radius_mm` and
 //! `proximity_error_mm` for the camera and proximity effects).
 //!
@@ -43,12 +42,13 @@ pub const TRUTH_MESH_LEVEL: i32 = 0;
 pub const TRUTH_STEPS: usize = 38;
 /// Final tube travel of the truth solves.
 pub const TRUTH_MAX_DEPTH_MM: f64 = 1.9;
-/// Mesh level of the two solves whose difference is the truth's physical table effect (a
-/// thinner layer, friction, Yeoh stiffening): one level finer than the effect tables the
-/// diagnosis reads it from (half their element size), so that the effect's change is not
-/// carried by the diagnosis's own mesh. At mu = 0.4, 170 kPa, friction's change of the
-/// contact radius on the tables' mesh is within about 3 um of this level's, where the
-/// coarser level -2 was up to 7 um off in wiggles of alternating sign along the curve.
+/// Mesh level of the two solves whose difference is the truth's friction: one level finer
+/// than the friction table the diagnosis reads it from (half its element size), so that
+/// friction's change is not carried by the diagnosis's own mesh (the band of fine elements,
+/// which solves a thinner or stiffening truth directly, solves no frictional curve). At
+/// mu = 0.4, 170 kPa, friction's change of the contact radius on the table's mesh is within
+/// about 3 um of this level's, where the coarser level -2 was up to 7 um off in wiggles of
+/// alternating sign along the curve.
 pub const TRUTH_EFFECT_MESH_LEVEL: i32 = EFFECT_MESH_LEVEL + 1;
 
 /// The truth's solve settings for the plain 7 mm sample at (E2, p_air): the converged
@@ -323,14 +323,14 @@ pub fn truth_mechanics_cached(
 /// The truth's curves for a `solve` mechanics source (empty for other sources), in
 /// hil-sim's modulus-major order; they can be saved as JSON and run as a `curves` source.
 ///
-/// The sample's elastic response is the converged solve (mesh level
-/// [`TRUTH_MESH_LEVEL`] with the edge band) of the 7 mm frictionless neo-Hookean sample at
-/// the exact modulus and pressure. A physical table effect (a thinner sample, friction,
-/// Yeoh stiffening) is added as the difference of two solves one mesh level finer than
-/// the effect tables ([`TRUTH_EFFECT_MESH_LEVEL`], the tables' step), with and without it,
-/// at equal tube travel: the edge band is for frictionless samples. The diagnosis reads
-/// its effects as the same kind of difference (its tables' slices minus their base), so
-/// neither the sample nor its effect shares the diagnosis's mesh.
+/// The sample's elastic response is the converged solve (mesh level [`TRUTH_MESH_LEVEL`]
+/// with the edge band) at the exact modulus and pressure, with the sample's own thickness
+/// and strain stiffening: a thinner or stiffening sample is solved as it is, not as a table's
+/// change. Friction, which the band does not solve, is added as the difference of two solves
+/// one mesh level finer than the friction table ([`TRUTH_EFFECT_MESH_LEVEL`], the table's
+/// step), with and without it, at equal tube travel. The diagnosis reads its effects as
+/// changes of its tables' slices at their nodes, so it sees their interpolation in the
+/// modulus, the pressure and the effect's parameter, and for friction a coarser mesh.
 pub fn truth_curves(scenario: &Scenario) -> Result<Vec<Curve>, TruthError> {
     let solve = |simulation: &fem_core::Simulation| -> Result<Curve, TruthError> {
         Ok(simulation
@@ -371,21 +371,19 @@ struct TruthSolves {
 
 /// The solves [`truth_curves`] makes for `scenario`, one per curve.
 fn truth_solves(scenario: &Scenario) -> Vec<TruthSolves> {
-    let plain_sample = hil_sim::scenario::SampleConfig::default();
     hil_sim::mechanics_source::solve_params(scenario)
         .into_iter()
         .map(|params| {
-            let plain = CurveParams {
-                sample_thickness_mm: plain_sample.thickness_mm,
+            // the sample as it is (its thickness, law and stiffening), without friction:
+            // one converged solve with the band
+            let frictionless = CurveParams {
                 friction: 0.0,
-                material: plain_sample.law,
-                sample_stiffening: 0.0,
                 ..params.clone()
             };
-            let sample = fem_core::Simulation::new(&plain).with_edge_band();
-            // the two solves one mesh level finer than the effect tables (the truth must
-            // not share the diagnosis's mesh), at the tables' step, to one step short of
-            // their last travel
+            let sample = fem_core::Simulation::new(&frictionless).with_edge_band();
+            // friction: the two solves one mesh level finer than its table (the truth must
+            // not share the diagnosis's mesh), at the table's step, to one step short of its
+            // last travel
             let steps = EFFECT_STEPS - 1;
             let at_table_settings = |p: &CurveParams| {
                 fem_core::Simulation::new(&CurveParams {
@@ -395,8 +393,8 @@ fn truth_solves(scenario: &Scenario) -> Vec<TruthSolves> {
                     ..p.clone()
                 })
             };
-            let effect =
-                (plain != params).then(|| (at_table_settings(&params), at_table_settings(&plain)));
+            let effect = (frictionless != params)
+                .then(|| (at_table_settings(&params), at_table_settings(&frictionless)));
             TruthSolves {
                 params,
                 sample,
@@ -690,6 +688,22 @@ mod tests {
             frictional_key.solves
         );
         assert_ne!(frictional_path, path);
+        // a thinner sample is one band solve per curve at its own thickness
+        let thinner = truth_scenario(&SimSpec {
+            hidden: Some(Hidden {
+                kind: EffectKind::FiniteThickness,
+                size: 1.5,
+            }),
+            ..SimSpec::default()
+        });
+        let (thinner_key, _) = cache_file(&thinner, &dir).expect("key");
+        assert_eq!(thinner_key.solves.len(), 2, "{:?}", thinner_key.solves);
+        assert!(
+            thinner_key
+                .solves
+                .iter()
+                .all(|s| s.contains("edge_band: Some") && s.contains("sample_thickness_mm: 5.5"))
+        );
         // a stored truth with this key is returned as stored, without solving
         let stored = vec![curve(10, 0.1, 0.0), curve(10, 0.1, 0.01)];
         let text = serde_json::to_string(&CachedTruthRef {

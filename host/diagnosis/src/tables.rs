@@ -1,25 +1,28 @@
 //! The effect tables the diagnosis reads: fem-core lookup tables over modulus x pressure with
-//! one varied effect axis each (sample thickness, friction, strain stiffening), on the
-//! production mesh (level 0, 0.05 mm steps of tube travel). The diagnosis reads them only as
+//! one varied effect axis each (sample thickness, friction, strain stiffening), 0.05 mm steps
+//! of tube travel. The frictionless ones (thickness, stiffening) are solved like the
+//! converged baseline, with the band of fine elements that follows the contact edge; friction's on the
+//! production mesh (the band solves no frictional curve). The diagnosis reads them only as
 //! changes from their base slice (the slice at the axis' base value), added to the converged
-//! baseline ([`converged_baseline`]); the simulated truth adds its physical effects the same
-//! way, from solves one mesh level finer (`simulate::truth_curves`). An effect's change is
-//! carried far better than the contact radius itself: 2.4-3.9 um RMS from converged solves at level 0, against 5-19 um at level -2
-//! (`tests/tests/diagnose_effect_deltas.rs`).
+//! baseline ([`converged_baseline`]). The simulated truth solves a thinner or stiffening
+//! sample directly with the band at its exact parameters, and adds friction as the change
+//! between two solves one mesh level finer than its table (`simulate::truth_curves`).
+//! How well the tables carry an effect is measured in `tests/tests/diagnose_effect_deltas.rs`.
 //!
-//! Building them reuses fem-core's builder ([`fem_core::lut::build_lut`]) on the grids of
+//! Building them reuses fem-core's builder ([`fem_core::lut::build_fem_lut`]) on the grids of
 //! [`effect_grids`]; [`sub_table`] cuts a one-slice table out of a multi-slice one so the
 //! host's fit ([`fit::LutModel`]) can use it unchanged.
 
 use std::path::{Path, PathBuf};
 
 use fem_core::CurveParams;
-use fem_core::lut::{EffectSelection, GridIndex, Lut, LutCurve, LutGrid, log_spaced};
+use fem_core::lut::{
+    EffectSelection, GridIndex, Lut, LutCurve, LutGrid, Shard, TableSolve, log_spaced,
+};
 
-/// Mesh level of the effect tables: the production mesh (the simulated truth solves its
-/// effects one level finer, `simulate::TRUTH_EFFECT_MESH_LEVEL`). The band of fine elements
-/// at the contact edge would carry an effect's change to about a micrometre, but costs 5-8 times the time (the
-/// 650 curves would take hours) and solves no frictional curve.
+/// Mesh level of the effect tables: the production mesh, with the band of fine elements at
+/// the contact edge for the frictionless tables ([`EffectAxis::table_solve`]; the
+/// simulated truth solves friction one level finer, `simulate::TRUTH_EFFECT_MESH_LEVEL`).
 pub const EFFECT_MESH_LEVEL: i32 = 0;
 /// Load steps per curve of those tables (to `EFFECT_MAX_DEPTH_MM`): 0.05 mm of travel, the
 /// converged table's.
@@ -90,6 +93,18 @@ impl EffectAxis {
             Self::Thickness => &grid.effects.sample_thickness_mm,
             Self::Friction => &grid.effects.friction,
             Self::Stiffening => &grid.effects.stiffening,
+        }
+    }
+
+    /// How the table's curves are solved: the frictionless tables like the converged
+    /// baseline, with the band of fine elements at the contact edge (an effect's change
+    /// then carries no production-mesh scatter of the contact edge, which had put it 2.4-3.9
+    /// um RMS off converged solves); friction on the production mesh, since the band solves
+    /// no frictional curve.
+    pub fn table_solve(self) -> TableSolve {
+        match self {
+            Self::Thickness | Self::Stiffening => TableSolve::EdgeBand,
+            Self::Friction => TableSolve::Plain,
         }
     }
 
@@ -187,19 +202,20 @@ pub fn shipped_tables_dir() -> PathBuf {
     fem_core::shipped::data_dir()
 }
 
-/// Builds the table of `axis` with fem-core's solver (in parallel on the rayon pool) and
-/// writes it to `out`; returns (sha256, failed curves). `on_curve` reports each curve.
+/// Builds the table of `axis` (or shard `shard` of it) with fem-core's solver as
+/// [`EffectAxis::table_solve`] says, in parallel on the rayon pool, and writes it to `out`;
+/// returns (sha256, failed curves). `on_curve` reports each curve. The shards merge with
+/// [`fem_core::lut::merge_shards`] into the table a single build writes, bit for bit.
 pub fn build_effect_table(
     axis: EffectAxis,
     out: &Path,
+    shard: Option<Shard>,
     on_curve: &(dyn Fn(&fem_core::lut::CurveReport) + Sync),
 ) -> Result<(String, usize), fem_core::lut::LutError> {
     let grid = effect_grid(axis);
-    let description = fem_core::lut::fem_solver_description(grid.base.mesh_level);
     // curves that stop converging near the end of the travel (thin, soft samples) are kept
     // up to their last converged step (fem-core records them as truncated)
-    let solver = |p: &CurveParams| fem_core::lut::solve_curve_for_table(p, &|_, _| {});
-    let lut = fem_core::lut::build_lut(&grid, None, &solver, &description, on_curve)?;
+    let lut = fem_core::lut::build_fem_lut(&grid, shard, axis.table_solve(), &|_, _| {}, on_curve)?;
     let hash = fem_core::lut::write_lut(out, &lut)?;
     Ok((hash, lut.failures().count()))
 }
@@ -276,17 +292,17 @@ pub fn converged_baseline() -> Result<Lut, TableError> {
         })
 }
 
-/// The effect tables' base slice (the production mesh without the edge band: a baseline
-/// whose contact radius carries the mesh's own error), for studies of such a model.
-pub fn coarse_baseline(effects: &[EffectTable]) -> Result<Lut, TableError> {
-    let t = effects.first().ok_or(TableError::Read {
-        path: shipped_tables_dir().display().to_string(),
-        reason: "no effect tables".into(),
-    })?;
-    sub_table(&t.lut, &t.axis.select(t.axis.base_value())).map_err(|e| TableError::Slice {
-        path: t.path.clone(),
-        reason: e.to_string(),
-    })
+/// The production table (`fem-core/data/default.lut`: the production mesh without the edge
+/// band, whose contact radius carries the mesh's own error, up to about 25 um), for studies
+/// of a diagnosis on such a baseline (`tactile diagnose --lut`).
+pub fn production_baseline() -> Result<Lut, TableError> {
+    let path = fem_core::shipped::default_lut_path();
+    fem_core::lut::read_lut(&path)
+        .map(|f| f.lut)
+        .map_err(|e| TableError::Read {
+            path: path.display().to_string(),
+            reason: e.to_string(),
+        })
 }
 
 /// A complete one-slice table cut out of `lut` at the effect selection `sel` (every other

@@ -70,8 +70,13 @@ fn below_its_first_inflated_node_the_converged_baseline_moves_as_the_dense_table
     // 25 kPa is outside the reference (13-17 kPa around 15): the converged table's own
     // interpolation between 20 and 30 kPa
     assert_eq!(model.base.sample(e, 25.0, u), own.sample(e, 25.0, u));
-    // a coarse baseline with the thickness table's own pressures gets no reference
-    let coarse = diagnosis::tables::coarse_baseline(&effects).expect("coarse baseline");
-    let coarse_model = Model::new(&coarse, &effects).expect("coarse model");
-    assert!(!coarse_model.base.has_pressure_reference());
+    // a baseline with the thickness table's own pressures (its base slice) gets no
+    // reference; the production table, at the converged table's pressures, does
+    let slice = diagnosis::tables::sub_table(&t.lut, &t.axis.select(t.axis.base_value()))
+        .expect("base slice");
+    let slice_model = Model::new(&slice, &effects).expect("slice model");
+    assert!(!slice_model.base.has_pressure_reference());
+    let production = diagnosis::tables::production_baseline().expect("production table");
+    let production_model = Model::new(&production, &effects).expect("production model");
+    assert!(production_model.base.has_pressure_reference());
 }

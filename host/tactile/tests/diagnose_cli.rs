@@ -100,6 +100,29 @@ fn a_missing_file_and_a_curve_without_pressure_are_named() {
 }
 
 #[test]
+fn a_bad_table_build_request_is_refused_before_any_solve() {
+    let dir = scratch("build-tables");
+    for (args, named) in [
+        (vec!["--shard", "3/2"], "--shard"),
+        (vec!["--shard", "one"], "--shard"),
+        (vec!["--only", "thikness"], "thikness"),
+    ] {
+        let out = tactile()
+            .arg("diagnose")
+            .arg("--build-tables")
+            .arg(&dir)
+            .args(&args)
+            .output()
+            .expect("run tactile");
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(named), "{args:?}: {err}");
+        // nothing written
+        assert_eq!(std::fs::read_dir(&dir).expect("dir").count(), 0, "{args:?}");
+    }
+}
+
+#[test]
 fn json_carries_the_documented_fields_and_names_a_camera_scale() {
     let dir = scratch("json");
     let file = dir.join("scale.csv");

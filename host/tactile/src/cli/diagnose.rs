@@ -47,12 +47,19 @@ pub struct DiagnoseArgs {
     /// Seed of the bootstrap and confidence simulations (and of --simulate).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Build the effect tables into this directory (fem-core, production mesh) and exit.
+    /// Build the effect tables into this directory (fem-core: thickness and stiffening with the
+    /// band of fine elements at the contact edge, friction on the production mesh; hours on
+    /// two cores) and exit.
     #[arg(long, value_name = "DIR")]
     pub build_tables: Option<PathBuf>,
     /// With --build-tables: only these (thickness, friction, stiffening).
     #[arg(long, value_delimiter = ',')]
     pub only: Vec<String>,
+    /// With --build-tables: build only shard K of N of each table (zero-based K: curves
+    /// with index % N == K) into effects-NAME.shard-K-of-N.lut; `tactile lut merge` joins
+    /// the N shards into the table a single build writes, bit for bit.
+    #[arg(long, value_name = "K/N")]
+    pub shard: Option<String>,
     /// Simulate hidden-effect data with hil-sim: EFFECT=SIZE (e.g. friction=0.4), several
     /// joined by commas (e.g. finite_thickness=1.5,displacement_offset=0.04), or none;
     /// also one effect outside the library: lens_distortion=K (1/mm^2, the image radius
@@ -94,7 +101,7 @@ fn bad_input(e: impl std::fmt::Display) -> ExitCode {
 
 pub fn run(args: DiagnoseArgs) -> ExitCode {
     if let Some(dir) = &args.build_tables {
-        return build_tables(dir, &args.only);
+        return build_tables(dir, &args);
     }
     if let Some(spec) = &args.simulate {
         return simulate(&args, spec);
@@ -376,18 +383,42 @@ fn confusion(
     ExitCode::SUCCESS
 }
 
-fn build_tables(dir: &Path, only: &[String]) -> ExitCode {
+fn build_tables(dir: &Path, args: &DiagnoseArgs) -> ExitCode {
+    let shard = match args
+        .shard
+        .as_deref()
+        .map(fem_core::lut::Shard::parse)
+        .transpose()
+    {
+        Ok(s) => s,
+        Err(e) => return bad_input(format!("--shard: {e}")),
+    };
+    for o in &args.only {
+        if !["thickness", "friction", "stiffening"].contains(&o.as_str()) {
+            return bad_input(format!(
+                "--only: unknown table {o:?} (thickness, friction or stiffening)"
+            ));
+        }
+    }
     for axis in EffectAxis::ALL {
         let name = match axis {
             EffectAxis::Thickness => "thickness",
             EffectAxis::Friction => "friction",
             EffectAxis::Stiffening => "stiffening",
         };
-        if !only.is_empty() && !only.iter().any(|o| o == name) {
+        if !args.only.is_empty() && !args.only.iter().any(|o| o == name) {
             continue;
         }
-        let out = dir.join(axis.file_name());
-        let total = diagnosis::tables::effect_grid(axis).curve_count();
+        let out = match shard {
+            Some(s) => dir.join(format!(
+                "effects-{name}.shard-{}-of-{}.lut",
+                s.index, s.count
+            )),
+            None => dir.join(axis.file_name()),
+        };
+        let total = (0..diagnosis::tables::effect_grid(axis).curve_count())
+            .filter(|&i| shard.is_none_or(|s| s.contains(i)))
+            .count();
         let done = AtomicUsize::new(0);
         let report = |r: &fem_core::lut::CurveReport| {
             let k = done.fetch_add(1, Ordering::Relaxed) + 1;
@@ -402,7 +433,7 @@ fn build_tables(dir: &Path, only: &[String]) -> ExitCode {
             );
         };
         let start = Instant::now();
-        match build_effect_table(axis, &out, &report) {
+        match build_effect_table(axis, &out, shard, &report) {
             Ok((hash, failed)) => eprintln!(
                 "wrote {} (sha256:{hash}, {failed} failed curve(s)) in {:.1} s wall",
                 out.display(),
