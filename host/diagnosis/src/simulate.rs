@@ -667,13 +667,13 @@ mod tests {
         // a frictional one adds the two finer solves whose difference carries friction
         assert_eq!(key.solves.len(), 2, "{:?}", key.solves);
         assert!(key.solves.iter().all(|s| s.contains("edge_band: Some")));
-        let frictional = truth_scenario(&SimSpec {
-            hidden: Some(Hidden {
-                kind: EffectKind::Friction,
-                size: 0.4,
-            }),
-            ..SimSpec::default()
-        });
+        let hidden = |kind, size| {
+            truth_scenario(&SimSpec {
+                hidden: Some(Hidden { kind, size }),
+                ..SimSpec::default()
+            })
+        };
+        let frictional = hidden(EffectKind::Friction, 0.4);
         let (frictional_key, frictional_path) = cache_file(&frictional, &dir).expect("key");
         assert_eq!(frictional_key.solves.len(), 6);
         let level = format!("mesh_level: {TRUTH_EFFECT_MESH_LEVEL}");
@@ -689,13 +689,7 @@ mod tests {
         );
         assert_ne!(frictional_path, path);
         // a thinner sample is one band solve per curve at its own thickness
-        let thinner = truth_scenario(&SimSpec {
-            hidden: Some(Hidden {
-                kind: EffectKind::FiniteThickness,
-                size: 1.5,
-            }),
-            ..SimSpec::default()
-        });
+        let thinner = hidden(EffectKind::FiniteThickness, 1.5);
         let (thinner_key, _) = cache_file(&thinner, &dir).expect("key");
         assert_eq!(thinner_key.solves.len(), 2, "{:?}", thinner_key.solves);
         assert!(

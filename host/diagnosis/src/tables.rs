@@ -278,26 +278,23 @@ pub fn shipped_tables() -> Result<(Lut, Vec<EffectTable>), TableError> {
 /// The diagnosis's baseline: the converged table (`fem-core/data/default-fine.lut`: the
 /// production grid solved with the band of fine elements at the contact edge, mesh level 0,
 /// 40 steps), so that what the diagnosis calls a disagreement is not the mesh of its own
-/// model. The effects are read from the coarse effect tables as changes from their base
-/// slice ([`super::model::AxisSurfaces::delta`]), and pressures below the converged
-/// table's first inflated node through the thickness table's 1 kPa steps
+/// model. The effects are read from the effect tables as changes from their base slice
+/// ([`super::model::AxisSurfaces::delta`]), and pressures below the converged table's
+/// first inflated node through the thickness table's 1 kPa steps
 /// ([`super::model::Surface::with_pressure_reference`]).
 pub fn converged_baseline() -> Result<Lut, TableError> {
-    let path = fem_core::shipped::fine_lut_path();
-    fem_core::lut::read_lut(&path)
-        .map(|f| f.lut)
-        .map_err(|e| TableError::Read {
-            path: path.display().to_string(),
-            reason: e.to_string(),
-        })
+    read_baseline(&fem_core::shipped::fine_lut_path())
 }
 
 /// The production table (`fem-core/data/default.lut`: the production mesh without the edge
 /// band, whose contact radius carries the mesh's own error, up to about 25 um), for studies
 /// of a diagnosis on such a baseline (`tactile diagnose --lut`).
 pub fn production_baseline() -> Result<Lut, TableError> {
-    let path = fem_core::shipped::default_lut_path();
-    fem_core::lut::read_lut(&path)
+    read_baseline(&fem_core::shipped::default_lut_path())
+}
+
+fn read_baseline(path: &Path) -> Result<Lut, TableError> {
+    fem_core::lut::read_lut(path)
         .map(|f| f.lut)
         .map_err(|e| TableError::Read {
             path: path.display().to_string(),
