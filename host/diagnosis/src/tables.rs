@@ -69,6 +69,15 @@ pub enum EffectAxis {
 impl EffectAxis {
     pub const ALL: [EffectAxis; 3] = [Self::Thickness, Self::Friction, Self::Stiffening];
 
+    /// The table's name (`--only`, `effects-NAME.lut`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Thickness => "thickness",
+            Self::Friction => "friction",
+            Self::Stiffening => "stiffening",
+        }
+    }
+
     /// File name of the shipped table.
     pub fn file_name(self) -> &'static str {
         match self {
@@ -153,7 +162,7 @@ pub fn effect_base_params() -> CurveParams {
 /// x the axis values.
 pub fn effect_grid(axis: EffectAxis) -> LutGrid {
     let mut grid = LutGrid::with_axes(
-        &format!("effects-{}", axis_name(axis)),
+        &format!("effects-{}", axis.name()),
         effect_base_params(),
         log_spaced(10.0, 1000.0, 13),
         match axis {
@@ -179,14 +188,6 @@ pub fn effect_grid(axis: EffectAxis) -> LutGrid {
         }
     }
     grid
-}
-
-fn axis_name(axis: EffectAxis) -> &'static str {
-    match axis {
-        EffectAxis::Thickness => "thickness",
-        EffectAxis::Friction => "friction",
-        EffectAxis::Stiffening => "stiffening",
-    }
 }
 
 /// The grids of all shipped effect tables.

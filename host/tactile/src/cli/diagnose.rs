@@ -394,18 +394,14 @@ fn build_tables(dir: &Path, args: &DiagnoseArgs) -> ExitCode {
         Err(e) => return bad_input(format!("--shard: {e}")),
     };
     for o in &args.only {
-        if !["thickness", "friction", "stiffening"].contains(&o.as_str()) {
+        if !EffectAxis::ALL.iter().any(|a| a.name() == o) {
             return bad_input(format!(
                 "--only: unknown table {o:?} (thickness, friction or stiffening)"
             ));
         }
     }
     for axis in EffectAxis::ALL {
-        let name = match axis {
-            EffectAxis::Thickness => "thickness",
-            EffectAxis::Friction => "friction",
-            EffectAxis::Stiffening => "stiffening",
-        };
+        let name = axis.name();
         if !args.only.is_empty() && !args.only.iter().any(|o| o == name) {
             continue;
         }
