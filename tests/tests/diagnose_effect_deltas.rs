@@ -106,21 +106,13 @@ fn change_error(
     (rms_a, rms_load)
 }
 
-#[test]
-#[ignore = "measurement (10 converged fem-core solves, about 4 min in release); cargo test --release -p system-tests --test diagnose_effect_deltas frictionless -- --ignored --nocapture"]
-fn the_frictionless_tables_change_between_their_nodes_agrees_with_converged_solves() {
-    // between the modulus nodes (190 kPa: 146.8 and 215.4; 38 kPa: 31.6 and 46.4) and
-    // between the effect's nodes (thickness 5 mm: 4.5 and 5.5; 4 mm: 3.5 and 4.5; Yeoh
-    // c2/c1 3.5: 2 and 5; 7.5: 5 and 10), at the two pressures the bench uses
-    let cases = [
-        (EffectAxis::Thickness, 5.0, 190.0, 6.0),
-        (EffectAxis::Thickness, 4.0, 190.0, 15.0),
-        (EffectAxis::Thickness, 5.0, 38.0, 6.0),
-        (EffectAxis::Stiffening, 3.5, 38.0, 6.0),
-        (EffectAxis::Stiffening, 7.5, 38.0, 15.0),
-    ];
+/// The change of `axis` at each case (value, E2, p_air) against two converged solves at the
+/// exact parameters; the cases that exceed 4.5 um RMS in a. The white noise of one measured
+/// point is about 4 um: a change off by more than that is an error the diagnosis could see
+/// in a single curve.
+fn frictionless_cases_off(axis: EffectAxis, cases: &[(f64, f64, f64)]) -> Vec<String> {
     let mut failed = Vec::new();
-    for (axis, value, e, p) in cases {
+    for &(value, e, p) in cases {
         let set = |c: &mut CurveParams| match axis {
             EffectAxis::Thickness => c.sample_thickness_mm = value,
             EffectAxis::Stiffening => c.sample_stiffening = value,
@@ -128,14 +120,37 @@ fn the_frictionless_tables_change_between_their_nodes_agrees_with_converged_solv
         };
         let (plain, effect) = (converged(e, p, |_| {}), converged(e, p, set));
         let (rms_a, _) = change_error(axis, value, e, p, (&plain, &effect));
-        // the white noise of one measured point is about 4 um: a change off by more than
-        // 4.5 um RMS would be an error the diagnosis could see in a single curve
         if rms_a > 4.5 {
             failed.push(format!(
                 "{axis:?} {value} at {e} kPa, {p} kPa: a RMS {rms_a:.1} um"
             ));
         }
     }
+    failed
+}
+
+#[test]
+#[ignore = "measurement (6 converged fem-core solves, about 2 min in release); cargo test --release -p system-tests --test diagnose_effect_deltas thickness -- --ignored --nocapture"]
+fn the_thickness_tables_change_between_its_nodes_agrees_with_converged_solves() {
+    // between the modulus nodes (190 kPa: 146.8 and 215.4; 38 kPa: 31.6 and 46.4) and the
+    // thickness nodes (5 mm: 4.5 and 5.5; 4 mm: 3.5 and 4.5), at the two pressures the bench
+    // uses; measured 1.0, 2.3 and 2.7 um RMS for changes of up to 33, 88 and 132 um
+    let failed = frictionless_cases_off(
+        EffectAxis::Thickness,
+        &[(5.0, 190.0, 6.0), (4.0, 190.0, 15.0), (5.0, 38.0, 6.0)],
+    );
+    assert!(failed.is_empty(), "{failed:?}");
+}
+
+#[test]
+#[ignore = "fails: read linearly between its Yeoh-ratio nodes (2, 5, 10) the stiffening table's change is 10 um RMS off converged solves, for changes of 340-590 um (docs/diagnosis.md, Effect tables); about 2 min in release; cargo test --release -p system-tests --test diagnose_effect_deltas stiffening -- --ignored --nocapture"]
+fn the_stiffening_tables_change_between_its_nodes_agrees_with_converged_solves() {
+    // between the modulus nodes 31.6 and 46.4 kPa (38 kPa) and the Yeoh-ratio nodes (c2/c1
+    // 3.5: 2 and 5; 7.5: 5 and 10), at the two pressures the bench uses
+    let failed = frictionless_cases_off(
+        EffectAxis::Stiffening,
+        &[(3.5, 38.0, 6.0), (7.5, 38.0, 15.0)],
+    );
     assert!(failed.is_empty(), "{failed:?}");
 }
 
