@@ -3,7 +3,7 @@
 //!
 //! Physical effects (computed by fem-core):
 //! - `finite_thickness`: the sample is thinner than the assumed 7 mm by theta mm (fem-core
-//!   curves on the thickness axis of the effect table, linear between axis values);
+//!   curves on the thickness axis of the effect table, a cubic along the axis, `model::along_axis`);
 //! - `friction`: Coulomb friction theta = mu between shell and sample (friction axis);
 //! - `strain_stiffening`: the sample is a compressible Yeoh solid with c2/c1 = theta
 //!   (fem-core's hyperelastic law, stiffening axis); without a stiffening table, hil-sim's

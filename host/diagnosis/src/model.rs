@@ -262,27 +262,95 @@ impl<'a> AxisSurfaces<'a> {
         })
     }
 
-    /// `channel` at axis value `v` minus its value at the axis' base value (linear between
-    /// axis nodes).
+    /// `channel` at axis value `v` minus its value at the axis' base value, read along the
+    /// axis by [`along_axis`] (a cubic through the nodes around `v`, in the axis'
+    /// [`EffectAxis::interpolation_coordinate`]).
     pub fn delta(&self, channel: Channel, e: f64, p: f64, u: f64, v: f64) -> f64 {
-        let at = |v: f64| -> f64 {
-            let n = self.values.len();
-            let k = match self.values.iter().position(|&x| x >= v) {
-                Some(0) => 0,
-                Some(k) => k - 1,
-                None => n - 2,
-            }
-            .min(n - 2);
-            let (v0, v1) = (self.values[k], self.values[k + 1]);
-            let w = ((v - v0) / (v1 - v0)).clamp(0.0, 1.0);
-            let a0 = channel.of(&self.surfaces[k].sample(e, p, u));
-            if w == 0.0 {
-                return a0;
-            }
-            a0 + w * (channel.of(&self.surfaces[k + 1].sample(e, p, u)) - a0)
+        let nodes: Vec<f64> = self
+            .values
+            .iter()
+            .map(|&x| self.axis.interpolation_coordinate(x))
+            .collect();
+        let at = |v: f64| {
+            along_axis(&nodes, self.axis.interpolation_coordinate(v), |k| {
+                channel.of(&self.surfaces[k].sample(e, p, u))
+            })
         };
         at(v) - at(self.axis.base_value())
     }
+}
+
+/// A quantity known at the increasing axis nodes `nodes` (`value_at(k)` at node k), read at
+/// `v`: the piecewise cubic Hermite interpolant whose slope at each node is that of the
+/// parabola through the node and its two neighbours (one-sided at the ends; Fritsch and
+/// Carlson 1980, eq. 2-3, for the Hermite form), exact for a quadratic in `v`. An effect's
+/// change is curved along its axis (the Yeoh term grows with the square of the strain,
+/// friction saturates as the contact sticks): a chord between two nodes misses by a
+/// fraction of the effect that a cubic does not. Where the data turn (secants of opposite
+/// sign) the slope is zero and elsewhere it is limited to three times the secant, Fritsch
+/// and Carlson's sufficient condition, so the interpolant never overshoots monotone data.
+/// Held at the end values outside the nodes; reads at most four nodes, one at a node.
+pub fn along_axis(nodes: &[f64], v: f64, value_at: impl Fn(usize) -> f64) -> f64 {
+    let n = nodes.len();
+    if n == 1 || v <= nodes[0] {
+        return value_at(0);
+    }
+    if v >= nodes[n - 1] {
+        return value_at(n - 1);
+    }
+    // interval k: nodes[k] <= v < nodes[k + 1]
+    let k = nodes.partition_point(|&x| x <= v) - 1;
+    if v == nodes[k] {
+        return value_at(k);
+    }
+    let lo = k.saturating_sub(1);
+    let hi = (k + 2).min(n - 1);
+    let y: Vec<f64> = (lo..=hi).map(&value_at).collect();
+    let x = &nodes[lo..=hi];
+    let secant = |i: usize| (y[i + 1] - y[i]) / (x[i + 1] - x[i]);
+    // slope at local node i (parabola through its neighbours), limited
+    let slope = |i: usize| -> f64 {
+        let m = x.len();
+        if m == 2 {
+            return secant(0);
+        }
+        let d = if i == 0 {
+            let (h0, h1) = (x[1] - x[0], x[2] - x[1]);
+            ((2.0 * h0 + h1) * secant(0) - h0 * secant(1)) / (h0 + h1)
+        } else if i == m - 1 {
+            let (h0, h1) = (x[i - 1] - x[i - 2], x[i] - x[i - 1]);
+            ((2.0 * h1 + h0) * secant(i - 1) - h1 * secant(i - 2)) / (h0 + h1)
+        } else {
+            let (sl, sr) = (secant(i - 1), secant(i));
+            if sl * sr <= 0.0 {
+                return 0.0;
+            }
+            let (hl, hr) = (x[i] - x[i - 1], x[i + 1] - x[i]);
+            (hr * sl + hl * sr) / (hl + hr)
+        };
+        // the end slopes: same sign as the adjacent secant
+        let s = if i == 0 { secant(0) } else { secant(i - 1) };
+        if d * s <= 0.0 { 0.0 } else { d }
+    };
+    let i = k - lo;
+    let s = secant(i);
+    let limit = |d: f64| {
+        if s == 0.0 || d * s <= 0.0 {
+            0.0
+        } else if d.abs() > 3.0 * s.abs() {
+            3.0 * s
+        } else {
+            d
+        }
+    };
+    let (d0, d1) = (limit(slope(i)), limit(slope(i + 1)));
+    let h = x[i + 1] - x[i];
+    let t = (v - x[i]) / h;
+    let (t2, t3) = (t * t, t * t * t);
+    (2.0 * t3 - 3.0 * t2 + 1.0) * y[i]
+        + (t3 - 2.0 * t2 + t) * h * d0
+        + (-2.0 * t3 + 3.0 * t2) * y[i + 1]
+        + (t3 - t2) * h * d1
 }
 
 /// A table the model cannot be built from.
@@ -457,5 +525,51 @@ impl<'a> Model<'a> {
         (channel.of(&self.base.sample(e, p, u + h))
             - channel.of(&self.base.sample(e, p, (u - h).max(0.0))))
             / (u + h - (u - h).max(0.0))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::along_axis;
+
+    const NODES: [f64; 5] = [0.0, 2.0, 5.0, 10.0, 20.0];
+
+    #[test]
+    fn the_axis_interpolant_is_exact_for_a_quadratic() {
+        // the slopes are those of parabolas through three nodes: a quadratic that is
+        // monotone over the nodes (the limiter flattens a turning point) is reproduced to
+        // rounding everywhere, between the end nodes too
+        let f = |x: f64| 3.0 + 0.5 * x + 0.1 * x * x;
+        for v in [0.5, 1.0, 3.5, 4.9, 7.5, 12.0, 19.0] {
+            let read = along_axis(&NODES, v, |k| f(NODES[k]));
+            assert!((read - f(v)).abs() < 1e-12, "{v}: {read} vs {}", f(v));
+        }
+    }
+
+    #[test]
+    fn the_axis_interpolant_keeps_monotone_data_within_its_nodes() {
+        // a step: the unlimited cubic would overshoot 1 and undershoot 0 next to it
+        let y = [0.0, 0.0, 1.0, 1.0, 1.0];
+        let mut last = f64::NEG_INFINITY;
+        for i in 0..=200 {
+            let v = 20.0 * i as f64 / 200.0;
+            let read = along_axis(&NODES, v, |k| y[k]);
+            assert!((0.0..=1.0).contains(&read), "{v}: {read}");
+            assert!(read >= last - 1e-15, "not monotone at {v}");
+            last = read;
+        }
+    }
+
+    #[test]
+    fn the_axis_interpolant_reads_nodes_exactly_and_holds_its_ends() {
+        let y = [1.0, 4.0, 2.0, 8.0, 5.0];
+        for (k, &x) in NODES.iter().enumerate() {
+            assert_eq!(along_axis(&NODES, x, |j| y[j]), y[k]);
+        }
+        assert_eq!(along_axis(&NODES, -1.0, |j| y[j]), 1.0);
+        assert_eq!(along_axis(&NODES, 25.0, |j| y[j]), 5.0);
+        // two nodes: the chord
+        let read = along_axis(&[1.0, 3.0], 2.5, |j| [2.0, 6.0][j]);
+        assert!((read - 5.0).abs() < 1e-12);
     }
 }
