@@ -2,7 +2,7 @@
 //! (`Simulation::with_edge_band`) next to the production mesh's.
 //!
 //! `cargo run --release -p fem-core --example edge_band_curve -- E2_kpa p_air_kpa depth_mm
-//! steps`, e.g. `-- 200 6 1.7 34`: per step h, a and load P of both, their difference, and
+//! steps [friction]`, e.g. `-- 200 6 1.7 34`: per step h, a and load P of both, their difference, and
 //! the solve times; then the production error's mean, RMS and largest value over
 //! h >= 0.2 mm.
 
@@ -16,6 +16,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         pressure_kpa: arg(1, "6").parse()?,
         max_depth_mm: arg(2, "1.7").parse()?,
         steps: arg(3, "34").parse()?,
+        friction: arg(4, "0").parse()?,
         ..Default::default()
     };
     let production = Simulation::new(&params).solve()?.complete()?;

@@ -14,7 +14,15 @@
 //! solved again before the step. The edge itself stays inside fine elements of both meshes,
 //! so the contact state near it carries over.
 //!
-//! Frictionless curves only: the frictional slip history is not transferred.
+//! Friction carries over too. Its regularised Coulomb law (`crate::contact`) makes the
+//! tangential force a function of each slave's slip since a reference, its surface
+//! coordinate at the last converged state, and nothing else: the moved mesh takes each of
+//! its slaves' coordinates in the carried state as that reference, the re-solve rebuilds
+//! the tangential tractions from slips of the law's regularisation length (0.4 um at 0.05
+//! mm steps), and the re-solved state is the reference of the next step, as a converged
+//! step's is. Friction's change of a and of the load is then closer to solves two mesh
+//! levels finer than the production mesh's is (docs/fem-verification.md, "Friction in
+//! the band").
 
 use crate::mesh::Block;
 

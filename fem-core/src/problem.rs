@@ -224,7 +224,7 @@ pub struct SolverSettings {
     pub shell_skirt_mm: f64,
     /// Contact discretisation (see [`ContactPasses`]).
     pub contact_passes: ContactPasses,
-    /// A band of fine elements that follows the contact edge (frictionless curves; see
+    /// A band of fine elements that follows the contact edge (see
     /// [`crate::edge_band`]); none: the mesh above throughout.
     pub edge_band: Option<EdgeBand>,
 }
@@ -1276,6 +1276,10 @@ impl Indentation {
             .previous_multipliers
             .as_ref()
             .map(|m| self.carried_multipliers(old, m));
+        // friction's reference: each slave's surface coordinate in the carried state, so
+        // the re-solve at this travel rebuilds the tangential tractions from micro-slips
+        // (the regularised law's force depends only on the slip since that reference)
+        self.commit_slip_state(&u_new);
         self.attempts = std::mem::take(&mut old.attempts);
         self.snap_through_path = std::mem::take(&mut old.snap_through_path);
         self.stage1_stats = old.stage1_stats.clone();
@@ -1283,6 +1287,20 @@ impl Indentation {
         self.band_move_failures = old.band_move_failures;
         self.earlier_meshes = old.stage2_work();
         u_new
+    }
+
+    /// Every contact pair's friction reference at the state `u` (its slaves' surface
+    /// coordinates; [`crate::contact::ContactPair::commit_slip_state`]).
+    fn commit_slip_state(&mut self, u: &[f64]) {
+        if self.model.contacts.iter().all(|c| c.friction == 0.0) {
+            return;
+        }
+        let positions: Vec<[f64; 2]> = (0..self.model.mesh.nodes.len())
+            .map(|n| self.model.position(u, n))
+            .collect();
+        for c in &mut self.model.contacts {
+            c.commit_slip_state(&|n: usize| positions[n]);
+        }
     }
 
     /// Curve outputs at the state `u`.
@@ -1637,7 +1655,7 @@ pub(crate) fn solve_stages(
     // stage 1: inflation of the shell alone
     // the band that follows the contact edge starts at the axis (and refines the shell of
     // stage 1 too, whose state stage 2 continues)
-    let band = settings.edge_band.filter(|_| params.friction == 0.0);
+    let band = settings.edge_band;
     let mut band_extent = band.map(|b| b.extent(0.0));
     let mut current = match (&band, &band_extent) {
         (Some(b), Some(extent)) => settings.with_band(b, *extent),
@@ -1731,6 +1749,7 @@ pub(crate) fn solve_stages(
                             &carried_multipliers,
                             &moved_state,
                         );
+                        moved.commit_slip_state(&moved_state);
                     }
                     moved.model.newton.max_iterations = usual_iterations;
                     moved.model.newton.contact_curvature_tangent = base_tangent;

@@ -85,7 +85,7 @@ pub struct Discretisation {
     pub penalty_factor: f64,
     /// Width of the contact law's smoothing, as a fraction of the fine element size.
     pub contact_smoothing: f64,
-    /// A band of fine elements that follows the contact edge (frictionless curves; see
+    /// A band of fine elements that follows the contact edge (see
     /// [`crate::edge_band`] and [`Simulation::with_edge_band`]).
     pub edge_band: Option<EdgeBand>,
 }
@@ -288,7 +288,7 @@ impl Simulation {
 
     /// The contact radius resolved by a band of fine elements that follows the contact
     /// edge ([`EdgeBand::CONVERGED`]: a converged to about 2 um, at 4-20 times the
-    /// production cost; frictionless curves only, others keep the plain mesh) over
+    /// production cost, frictional curves too) over
     /// [`crate::edge_band::CONVERGED_WALL_ELEMENTS`] elements through the shell's wall, the
     /// contact tangent without the master surface's curvature for a pressurised shell (the
     /// term makes Newton wander on the band's fine surfaces; set the pressure first,

@@ -47,8 +47,8 @@ pub enum TableSolve {
     /// The grid's mesh level throughout ([`crate::Simulation::new`]).
     Plain,
     /// The grid's mesh level with the band of fine elements that follows the contact edge
-    /// ([`crate::Simulation::with_edge_band`]): the converged contact radius. Frictional
-    /// curves keep the plain mesh (a table with friction on its axes is refused).
+    /// ([`crate::Simulation::with_edge_band`]): the converged contact radius, frictional
+    /// curves too.
     EdgeBand,
 }
 
@@ -75,11 +75,6 @@ pub fn build_fem_lut(
             )
         }
         TableSolve::EdgeBand => {
-            if grid.base.friction != 0.0 || grid.effects.friction.iter().any(|&f| f != 0.0) {
-                return Err(LutError::InvalidGrid(
-                    "the edge band solves frictionless curves only; the grid has friction".into(),
-                ));
-            }
             let solver = |p: &CurveParams| {
                 let solution = band_simulation(p).solve()?;
                 if let crate::StopReason::Stopped { error, .. } = &solution.stop {

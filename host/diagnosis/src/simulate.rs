@@ -1,9 +1,8 @@
 //! Hidden-effect data for tests and the confusion matrix, from hil-sim's plant in simulated
 //! time: the contact mechanics are direct fem-core solves at the sample's true parameters
 //! ([`truth_curves`]: a converged solve of the sample as it is, a thinner layer or the Yeoh
-//! stiffening law included, at the truth's off-grid modulus and true internal pressure,
-//! plus real friction as the difference of two solves one mesh level finer than the
-//! friction table) read by hil-sim's curve mechanics; the history and measurement effects are hil-sim's own code (`effects::EffectState` for
+//! stiffening law or friction included, at the truth's off-grid modulus and true internal
+//! pressure) read by hil-sim's curve mechanics; the history and measurement effects are hil-sim's own code (`effects::EffectState` for
 //! viscoelastic relaxation and adhesion, `EffectsConfig::camera_radius_mm` and
 //! `proximity_error_mm` for the camera and proximity effects).
 //!
@@ -26,7 +25,6 @@ use hil_sim::scenario::{MechanicsSource, Scenario};
 
 use super::candidates::EffectKind;
 use super::data::Point;
-use super::tables::{EFFECT_MAX_DEPTH_MM, EFFECT_MESH_LEVEL, EFFECT_STEPS};
 use fem_core::{Curve, CurveParams};
 
 /// Mesh level of the truth's sample: the production mesh with the band of fine elements
@@ -42,15 +40,6 @@ pub const TRUTH_MESH_LEVEL: i32 = 0;
 pub const TRUTH_STEPS: usize = 38;
 /// Final tube travel of the truth solves.
 pub const TRUTH_MAX_DEPTH_MM: f64 = 1.9;
-/// Mesh level of the two solves whose difference is the truth's friction: one level finer
-/// than the friction table the diagnosis reads it from (half its element size), so that
-/// friction's change is not carried by the diagnosis's own mesh (the band of fine elements,
-/// which solves a thinner or stiffening truth directly, solves no frictional curve). At
-/// mu = 0.4, 170 kPa, friction's change of the contact radius on the table's mesh is within
-/// about 3 um of this level's, where the coarser level -2 was up to 7 um off in wiggles of
-/// alternating sign along the curve.
-pub const TRUTH_EFFECT_MESH_LEVEL: i32 = EFFECT_MESH_LEVEL + 1;
-
 /// The truth's solve settings for the plain 7 mm sample at (E2, p_air): the converged
 /// table's mesh and step, to [`TRUTH_MAX_DEPTH_MM`] (solve them with
 /// `fem_core::Simulation::with_edge_band`).
@@ -324,13 +313,11 @@ pub fn truth_mechanics_cached(
 /// hil-sim's modulus-major order; they can be saved as JSON and run as a `curves` source.
 ///
 /// The sample's elastic response is the converged solve (mesh level [`TRUTH_MESH_LEVEL`]
-/// with the edge band) at the exact modulus and pressure, with the sample's own thickness
-/// and strain stiffening: a thinner or stiffening sample is solved as it is, not as a table's
-/// change. Friction, which the band does not solve, is added as the difference of two solves
-/// one mesh level finer than the friction table ([`TRUTH_EFFECT_MESH_LEVEL`], the table's
-/// step), with and without it, at equal tube travel. The diagnosis reads its effects as
-/// changes of its tables' slices at their nodes, so it sees their interpolation in the
-/// modulus, the pressure and the effect's parameter, and for friction a coarser mesh.
+/// with the edge band) at the exact modulus and pressure, with the sample's own thickness,
+/// strain stiffening and friction: a physical effect is solved as it is, not as a table's
+/// change. The diagnosis reads its effects as changes of its tables' slices at their
+/// nodes, so it sees their interpolation in the modulus, the pressure and the effect's
+/// parameter.
 pub fn truth_curves(scenario: &Scenario) -> Result<Vec<Curve>, TruthError> {
     let solve = |simulation: &fem_core::Simulation| -> Result<Curve, TruthError> {
         Ok(simulation
@@ -342,65 +329,15 @@ pub fn truth_curves(scenario: &Scenario) -> Result<Vec<Curve>, TruthError> {
             })?
             .curve)
     };
-    let mut out = Vec::new();
-    for plan in truth_solves(scenario) {
-        let sample = solve(&plan.sample)?;
-        match &plan.effect {
-            None => out.push(sample),
-            Some((with_effect, without)) => {
-                let (with_effect, without) = (solve(with_effect)?, solve(without)?);
-                out.push(with_table_effect(
-                    sample,
-                    &with_effect,
-                    &without,
-                    plan.params,
-                ));
-            }
-        }
-    }
-    Ok(out)
+    truth_solves(scenario).iter().map(solve).collect()
 }
 
-/// The solves of one truth curve: the sample's, and for a physical table effect the two
-/// whose difference adds it ([`truth_curves`]).
-struct TruthSolves {
-    params: CurveParams,
-    sample: fem_core::Simulation,
-    effect: Option<(fem_core::Simulation, fem_core::Simulation)>,
-}
-
-/// The solves [`truth_curves`] makes for `scenario`, one per curve.
-fn truth_solves(scenario: &Scenario) -> Vec<TruthSolves> {
+/// The solves [`truth_curves`] makes for `scenario`, one per curve: the sample as it is
+/// (its thickness, law, stiffening and friction), one converged solve with the band.
+fn truth_solves(scenario: &Scenario) -> Vec<fem_core::Simulation> {
     hil_sim::mechanics_source::solve_params(scenario)
-        .into_iter()
-        .map(|params| {
-            // the sample as it is (its thickness, law and stiffening), without friction:
-            // one converged solve with the band
-            let frictionless = CurveParams {
-                friction: 0.0,
-                ..params.clone()
-            };
-            let sample = fem_core::Simulation::new(&frictionless).with_edge_band();
-            // friction: the two solves one mesh level finer than its table (the truth must
-            // not share the diagnosis's mesh), at the table's step, to one step short of its
-            // last travel
-            let steps = EFFECT_STEPS - 1;
-            let at_table_settings = |p: &CurveParams| {
-                fem_core::Simulation::new(&CurveParams {
-                    mesh_level: TRUTH_EFFECT_MESH_LEVEL,
-                    steps,
-                    max_depth_mm: EFFECT_MAX_DEPTH_MM * steps as f64 / EFFECT_STEPS as f64,
-                    ..p.clone()
-                })
-            };
-            let effect = (frictionless != params)
-                .then(|| (at_table_settings(&params), at_table_settings(&frictionless)));
-            TruthSolves {
-                params,
-                sample,
-                effect,
-            }
-        })
+        .iter()
+        .map(|params| fem_core::Simulation::new(params).with_edge_band())
         .collect()
 }
 
@@ -409,9 +346,6 @@ fn truth_solves(scenario: &Scenario) -> Vec<TruthSolves> {
 #[derive(serde::Serialize, serde::Deserialize, PartialEq)]
 struct TruthKey {
     curves: Vec<CurveParams>,
-    effect_mesh_level: i32,
-    effect_steps: usize,
-    effect_max_depth_mm: f64,
     /// Every solve's full settings (mesh, edge band, wall elements, solver tolerances) and
     /// fem-core's output definitions (the contact-radius estimate): a change of the solver
     /// settings or of what a curve reports makes the cached truth stale.
@@ -435,16 +369,9 @@ struct CachedTruthRef<'a> {
 fn cache_file(scenario: &Scenario, dir: &Path) -> Result<(TruthKey, PathBuf), TruthError> {
     let key = TruthKey {
         curves: hil_sim::mechanics_source::solve_params(scenario),
-        effect_mesh_level: TRUTH_EFFECT_MESH_LEVEL,
-        effect_steps: EFFECT_STEPS,
-        effect_max_depth_mm: EFFECT_MAX_DEPTH_MM,
         solves: truth_solves(scenario)
             .iter()
-            .flat_map(|plan| {
-                std::iter::once(&plan.sample)
-                    .chain(plan.effect.iter().flat_map(|(a, b)| [a, b]))
-                    .map(|simulation| format!("{simulation:?}"))
-            })
+            .map(|simulation| format!("{simulation:?}"))
             .collect(),
         outputs: fem_core::lut::fem_solver_description(TRUTH_MESH_LEVEL),
     };
@@ -488,56 +415,6 @@ fn truth_curves_cached(scenario: &Scenario, dir: &Path) -> Result<Vec<Curve>, Tr
     std::fs::write(&partial, text).map_err(|e| cache_error(e.to_string()))?;
     std::fs::rename(&partial, &path).map_err(|e| cache_error(e.to_string()))?;
     Ok(curves)
-}
-
-/// `sample` plus (`with_effect` - `without`) in u_s, a and the load at equal tube travel
-/// (linear between their steps), up to the travel all three reach; labelled with the
-/// true sample's parameters.
-fn with_table_effect(
-    sample: Curve,
-    with_effect: &Curve,
-    without: &Curve,
-    params: CurveParams,
-) -> Curve {
-    let at = |c: &Curve, h: f64| -> Option<(f64, f64, f64)> {
-        let k = c.points.partition_point(|q| q.h_mm < h);
-        if k == c.points.len() {
-            let last = c.points.last()?;
-            return ((h - last.h_mm).abs() < 1e-9).then_some((last.u_s_mm, last.a_mm, last.load_n));
-        }
-        let q1 = &c.points[k];
-        if k == 0 {
-            return Some((q1.u_s_mm, q1.a_mm, q1.load_n));
-        }
-        let q0 = &c.points[k - 1];
-        let w = (h - q0.h_mm) / (q1.h_mm - q0.h_mm);
-        let lerp = |x: f64, y: f64| x + w * (y - x);
-        Some((
-            lerp(q0.u_s_mm, q1.u_s_mm),
-            lerp(q0.a_mm, q1.a_mm),
-            lerp(q0.load_n, q1.load_n),
-        ))
-    };
-    let mut curve = sample;
-    let mut points = Vec::with_capacity(curve.points.len());
-    for q in curve.points.drain(..) {
-        let (Some(e), Some(b)) = (at(with_effect, q.h_mm), at(without, q.h_mm)) else {
-            break;
-        };
-        let mut q = q;
-        q.u_s_mm += e.0 - b.0;
-        // no contact stays no contact; a contact the effect shrinks below zero ends at zero
-        q.a_mm = if q.a_mm > 0.0 {
-            (q.a_mm + e.1 - b.1).max(0.0)
-        } else {
-            0.0
-        };
-        q.load_n += e.2 - b.2;
-        points.push(q);
-    }
-    curve.points = points;
-    curve.params = params;
-    curve
 }
 
 /// Simulates the experiment with prebuilt mechanics of `truth_scenario(spec)`.
@@ -656,6 +533,30 @@ pub fn to_curve_csv(points: &[Point], note: &str) -> Result<String, fit::curve_c
 mod tests {
     use super::*;
 
+    /// A curve of `n` steps of `dh` mm: u_s = 0.5 h, a = 2 h (0 at h = 0), load = 0.1 h.
+    fn curve(n: usize, dh: f64, shift: f64) -> Curve {
+        Curve {
+            params: CurveParams::default(),
+            rest_volume_mm3: 0.0,
+            inflated_volume_mm3: 0.0,
+            inflation_apex_mm: 0.0,
+            points: (0..=n)
+                .map(|k| {
+                    let h = k as f64 * dh;
+                    fem_core::CurvePoint {
+                        h_mm: h,
+                        u_s_mm: 0.5 * h + shift,
+                        a_mm: if k == 0 { 0.0 } else { 2.0 * h + shift },
+                        load_n: 0.1 * h + shift,
+                        volume_mm3: 0.0,
+                        contact_pressure: Vec::new(),
+                    }
+                })
+                .collect(),
+            solve_seconds: 0.0,
+        }
+    }
+
     #[test]
     fn a_cached_truth_is_read_back_and_a_damaged_cache_file_is_named() {
         let dir = std::env::temp_dir().join(format!("truth-cache-test-{}", std::process::id()));
@@ -663,8 +564,7 @@ mod tests {
         let scenario = truth_scenario(&SimSpec::default());
         let (key, path) = cache_file(&scenario, &dir).expect("key");
         assert_eq!(key.curves.len(), 2, "one truth curve per pressure");
-        // the key holds every solve's settings: a plain sample is one band solve per curve,
-        // a frictional one adds the two finer solves whose difference carries friction
+        // the key holds every solve's settings: a plain sample is one band solve per curve
         assert_eq!(key.solves.len(), 2, "{:?}", key.solves);
         assert!(key.solves.iter().all(|s| s.contains("edge_band: Some")));
         let hidden = |kind, size| {
@@ -675,17 +575,18 @@ mod tests {
         };
         let frictional = hidden(EffectKind::Friction, 0.4);
         let (frictional_key, frictional_path) = cache_file(&frictional, &dir).expect("key");
-        assert_eq!(frictional_key.solves.len(), 6);
-        let level = format!("mesh_level: {TRUTH_EFFECT_MESH_LEVEL}");
+        // a frictional sample too is one band solve per curve, with its friction
         assert_eq!(
+            frictional_key.solves.len(),
+            2,
+            "{:?}",
+            frictional_key.solves
+        );
+        assert!(
             frictional_key
                 .solves
                 .iter()
-                .filter(|s| s.contains(&level) && s.contains("edge_band: None"))
-                .count(),
-            4,
-            "{:?}",
-            frictional_key.solves
+                .all(|s| s.contains("edge_band: Some") && s.contains("friction: 0.4"))
         );
         assert_ne!(frictional_path, path);
         // a thinner sample is one band solve per curve at its own thickness
@@ -721,67 +622,5 @@ mod tests {
             other => panic!("expected a cache error, got {other:?}"),
         }
         std::fs::remove_dir_all(&dir).expect("clean up");
-    }
-
-    /// A curve of `n` steps of `dh` mm: u_s = 0.5 h, a = 2 h (0 at h = 0), load = 0.1 h.
-    fn curve(n: usize, dh: f64, shift: f64) -> Curve {
-        Curve {
-            params: CurveParams::default(),
-            rest_volume_mm3: 0.0,
-            inflated_volume_mm3: 0.0,
-            inflation_apex_mm: 0.0,
-            points: (0..=n)
-                .map(|k| {
-                    let h = k as f64 * dh;
-                    fem_core::CurvePoint {
-                        h_mm: h,
-                        u_s_mm: 0.5 * h + shift,
-                        a_mm: if k == 0 { 0.0 } else { 2.0 * h + shift },
-                        load_n: 0.1 * h + shift,
-                        volume_mm3: 0.0,
-                        contact_pressure: Vec::new(),
-                    }
-                })
-                .collect(),
-            solve_seconds: 0.0,
-        }
-    }
-
-    #[test]
-    fn a_table_effect_is_added_at_equal_travel_up_to_the_shortest_curve() {
-        // fine sample: 0.05 mm steps to 1.0 mm; coarse pair: 0.1 mm steps, the effect curve
-        // 0.01 above the plain one in every quantity and ending at 0.8 mm
-        let sample = curve(20, 0.05, 0.0);
-        let mut with_effect = curve(10, 0.1, 0.01);
-        with_effect.points.truncate(9); // h = 0 .. 0.8 mm
-        let without = curve(10, 0.1, 0.0);
-        let params = CurveParams {
-            friction: 0.3,
-            ..CurveParams::default()
-        };
-        let c = with_table_effect(sample.clone(), &with_effect, &without, params.clone());
-        assert_eq!(c.params, params);
-        // ends where the effect curve ends (h = 0.8 mm: 17 fine steps from 0)
-        assert_eq!(c.points.len(), 17);
-        assert!((c.points[16].h_mm - 0.8).abs() < 1e-12);
-        for (q, s) in c.points.iter().zip(&sample.points) {
-            assert_eq!(q.h_mm, s.h_mm);
-            assert!((q.u_s_mm - (s.u_s_mm + 0.01)).abs() < 1e-12);
-            assert!((q.load_n - (s.load_n + 0.01)).abs() < 1e-12);
-            if s.a_mm == 0.0 {
-                // no contact in the sample stays no contact
-                assert_eq!(q.a_mm, 0.0);
-            } else {
-                // between coarse steps the delta is interpolated linearly: the coarse
-                // curves' a differ by 0.01 except at h = 0 (both 0), so at h = 0.05 the
-                // delta is half of it
-                let delta = if (s.h_mm - 0.05).abs() < 1e-12 {
-                    0.005
-                } else {
-                    0.01
-                };
-                assert!((q.a_mm - (s.a_mm + delta)).abs() < 1e-12, "h {}", s.h_mm);
-            }
-        }
     }
 }

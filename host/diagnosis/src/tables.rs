@@ -1,12 +1,10 @@
 //! The effect tables the diagnosis reads: fem-core lookup tables over modulus x pressure with
 //! one varied effect axis each (sample thickness, friction, strain stiffening), 0.05 mm steps
-//! of tube travel. The frictionless ones (thickness, stiffening) are solved like the
-//! converged baseline, with the band of fine elements that follows the contact edge; friction's on the
-//! production mesh (the band solves no frictional curve). The diagnosis reads them only as
-//! changes from their base slice (the slice at the axis' base value), added to the converged
-//! baseline ([`converged_baseline`]). The simulated truth solves a thinner or stiffening
-//! sample directly with the band at its exact parameters, and adds friction as the change
-//! between two solves one mesh level finer than its table (`simulate::truth_curves`).
+//! of tube travel, solved like the converged baseline, with the band of fine elements that
+//! follows the contact edge. The diagnosis reads them only as changes from their base slice
+//! (the slice at the axis' base value), added to the converged baseline
+//! ([`converged_baseline`]). The simulated truth solves a thinner, stiffening or frictional
+//! sample directly with the band at its exact parameters (`simulate::truth_curves`).
 //! How well the tables carry an effect is measured in `tests/tests/diagnose_effect_deltas.rs`.
 //!
 //! Building them reuses fem-core's builder ([`fem_core::lut::build_fem_lut`]) on the grids of
@@ -21,8 +19,7 @@ use fem_core::lut::{
 };
 
 /// Mesh level of the effect tables: the production mesh, with the band of fine elements at
-/// the contact edge for the frictionless tables ([`EffectAxis::table_solve`]; the
-/// simulated truth solves friction one level finer, `simulate::TRUTH_EFFECT_MESH_LEVEL`).
+/// the contact edge ([`EffectAxis::table_solve`]).
 pub const EFFECT_MESH_LEVEL: i32 = 0;
 /// Load steps per curve of those tables (to `EFFECT_MAX_DEPTH_MM`): 0.05 mm of travel, the
 /// converged table's.
@@ -105,16 +102,13 @@ impl EffectAxis {
         }
     }
 
-    /// How the table's curves are solved: the frictionless tables like the converged
-    /// baseline, with the band of fine elements at the contact edge (an effect's change
-    /// then carries no production-mesh scatter of the contact edge, which had put it 2.4-3.9
-    /// um RMS off converged solves); friction on the production mesh, since the band solves
-    /// no frictional curve.
+    /// How the table's curves are solved: like the converged baseline, with the band of
+    /// fine elements at the contact edge (an effect's change then carries no
+    /// production-mesh scatter of the contact edge, which had put it 2.4-3.9 um RMS off
+    /// converged solves), friction's too (its slip reference carried over each band move,
+    /// `fem_core::edge_band`).
     pub fn table_solve(self) -> TableSolve {
-        match self {
-            Self::Thickness | Self::Stiffening => TableSolve::EdgeBand,
-            Self::Friction => TableSolve::Plain,
-        }
+        TableSolve::EdgeBand
     }
 
     /// The coordinate in which the diagnosis interpolates between the axis' nodes

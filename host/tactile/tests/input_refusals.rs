@@ -252,15 +252,6 @@ fn a_measurement_that_fails_after_connecting_leaves_no_empty_record_folder() {
 }
 
 #[test]
-fn an_edge_band_with_friction_is_refused_before_solving() {
-    let dir = scratch("edge-band-friction");
-    let out = fem_curve(&dir, &["--friction", "0.3", "--edge-band"]);
-    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
-    assert!(stderr(&out).contains("--edge-band needs a frictionless curve"));
-    assert!(!dir.join("curve.csv").exists());
-}
-
-#[test]
 fn a_curve_that_stops_early_keeps_its_converged_steps() {
     // A point the solver does not pass (docs/fem.md, known limits: 146.8 kPa at 4.5 kPa on
     // mesh level -2 stops at h = 1.821 mm); if the solver learns to pass it, this test
