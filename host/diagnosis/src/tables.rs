@@ -40,12 +40,14 @@ pub const THICKNESS_AXIS_MM: [f64; 4] = [3.5, 4.5, 5.5, 7.0];
 /// saturates in mu as the contact sticks: at 166.8 kPa, 15 kPa and u_s 1.2 mm mu 0.2
 /// raises a by 15.6 um and mu 0.4 by 21.1 um, so a chord from 0 to 0.4 misreads the mu in
 /// between (10.6 um for mu 0.2).
-/// Frictional curves cost 15-100x a frictionless one (linear Newton convergence while
-/// slipping), so the table keeps to the moduli 46.4–464 kPa ([`friction_moduli_kpa`]).
+/// Frictional curves cost 2-4x a frictionless one with the band (45-125 s on one core;
+/// 15-100x on the production mesh: linear Newton convergence while slipping), so the table
+/// keeps to the moduli 46.4–464 kPa ([`friction_moduli_kpa`]).
 pub const FRICTION_AXIS: [f64; 5] = [0.0, 0.1, 0.2, 0.3, 0.4];
 /// Moduli of the friction table: ten nodes 46.4–464 kPa, 10^(1/9) (x1.29) apart, half the
-/// other tables' spacing there (the header's leave-one-out across E2: 9.4 / 11.6 um at 6 /
-/// 15 kPa, against 19.3 / 17.4 um with seven nodes 10^(1/6) apart).
+/// other tables' spacing there (the header's leave-one-out across E2: 9.0 / 6.9 um at 6 /
+/// 15 kPa; on the production mesh 9.4 / 11.6 um, and 19.3 / 17.4 um with seven nodes
+/// 10^(1/6) apart).
 pub fn friction_moduli_kpa() -> Vec<f64> {
     log_spaced(10.0, 1000.0, 19)[6..=15].to_vec()
 }
