@@ -6,7 +6,7 @@
 //! held two such seeds at 170 kPa with the Gaussian threshold alone, now one, seed 3). The
 //! full check (>= 100 seeds, <= 5 %) is
 //! `cargo test --release -p system-tests --test diagnose_null -- --ignored --nocapture`
-//! (measured 1 of 100 at 170 kPa, 2 at 25 kPa, 3 at 20 kPa, 4 at 60 kPa:
+//! (measured 3 of 100 at 170 kPa, 2 at 25 kPa, 4 at 20 kPa, 4 at 60 kPa:
 //! host/diagnosis/src/null-false-positives.txt, docs/diagnosis.md, Limitations).
 //! `NULL_SEEDS=N` runs the long check on fewer seeds (it then reports and fails, since the
 //! criterion needs >= 100); `NULL_MODULUS_KPA=E` at another true modulus (default 170);
