@@ -273,17 +273,3 @@ fn tables_record_the_edge_band_and_plain_tables_keep_their_bytes() {
     assert_eq!(back.header.mesh.edge_band, banded.edge_band);
     assert_eq!(back.lut, banded);
 }
-
-#[test]
-fn the_edge_band_refuses_a_grid_with_friction() {
-    // before any curve is solved: the band carries no slip history
-    let err = fem_core::lut::build_fem_lut(
-        &grid(),
-        None,
-        fem_core::lut::TableSolve::EdgeBand,
-        &|_, _| {},
-        &quiet,
-    )
-    .unwrap_err();
-    assert!(err.to_string().contains("frictionless"), "{err}");
-}

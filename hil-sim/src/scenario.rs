@@ -76,8 +76,8 @@ pub enum MechanicsSource {
         #[serde(default = "default_max_depth")]
         max_depth_mm: f64,
         /// Solve with the band of fine elements that follows the contact edge (the
-        /// converged contact radius, `fem_core::Simulation::with_edge_band`); frictionless
-        /// samples only.
+        /// converged contact radius, `fem_core::Simulation::with_edge_band`), frictional
+        /// samples too.
         #[serde(default)]
         edge_band: bool,
     },
@@ -414,19 +414,9 @@ impl Scenario {
             pressures_kpa,
             modulus_factors,
             steps,
-            edge_band,
             ..
         } = &self.mechanics
         {
-            if *edge_band && self.sample.friction != 0.0 {
-                return bad(
-                    "mechanics.edge_band",
-                    format!(
-                        "the edge band solves frictionless samples only; sample.friction is {}",
-                        self.sample.friction
-                    ),
-                );
-            }
             if pressures_kpa.is_empty()
                 || pressures_kpa.iter().any(|p| !(p.is_finite() && *p >= 0.0))
             {
@@ -522,27 +512,23 @@ mod tests {
     }
 
     #[test]
-    fn the_edge_band_solve_is_refused_with_friction_and_kept_without() {
+    fn the_edge_band_solve_is_kept_with_and_without_friction() {
         let text = |friction: f64| {
             format!(
                 "[sample]\nfriction = {friction}\n[mechanics]\nsource = \"solve\"\npressures_kpa = [6.0]\nedge_band = true\n"
             )
         };
-        let e = Scenario::parse(&text(0.3), Path::new("band.toml"))
-            .unwrap_err()
-            .to_string();
-        assert!(
-            e.contains("band.toml") && e.contains("mechanics.edge_band"),
-            "{e}"
-        );
-        let s = Scenario::parse(&text(0.0), Path::new("band.toml")).unwrap();
-        assert!(matches!(
-            s.mechanics,
-            MechanicsSource::Solve {
-                edge_band: true,
-                ..
-            }
-        ));
+        for friction in [0.0, 0.3] {
+            let s = Scenario::parse(&text(friction), Path::new("band.toml")).unwrap();
+            assert_eq!(s.sample.friction, friction);
+            assert!(matches!(
+                s.mechanics,
+                MechanicsSource::Solve {
+                    edge_band: true,
+                    ..
+                }
+            ));
+        }
     }
 
     #[test]
