@@ -11,18 +11,12 @@
 
 use fem_core::{Curve, CurveParams, Simulation};
 
-/// (a, load) of a curve at u_s, linear between its steps (None outside them or before
-/// contact).
+/// (a, load) of a curve at u_s (None outside its steps in contact).
 fn at(c: &Curve, u: f64) -> Option<(f64, f64)> {
-    let pts: Vec<_> = c.points.iter().filter(|q| q.a_mm > 0.0).collect();
-    let k = pts.partition_point(|q| q.u_s_mm < u);
-    if k == 0 || k == pts.len() {
-        return None;
-    }
-    let (q0, q1) = (pts[k - 1], pts[k]);
-    let t = (u - q0.u_s_mm) / (q1.u_s_mm - q0.u_s_mm);
-    let lerp = |x0: f64, x1: f64| x0 + t * (x1 - x0);
-    Some((lerp(q0.a_mm, q1.a_mm), lerp(q0.load_n, q1.load_n)))
+    Some((
+        c.in_contact_at_u_s(u, |q| q.a_mm)?,
+        c.in_contact_at_u_s(u, |q| q.load_n)?,
+    ))
 }
 
 const KINDS: [&str; 4] = ["band", "level 0", "level 1", "level 2"];

@@ -121,3 +121,23 @@ pub struct Curve {
     /// Wall-clock seconds the solve took (not part of any hash).
     pub solve_seconds: f64,
 }
+
+impl Curve {
+    /// `value` of the curve at apex displacement `u_s_mm`, linear between its steps in
+    /// contact (a > 0); None outside them. Two curves compared at equal u_s (an effect's
+    /// change) are read this way.
+    pub fn in_contact_at_u_s(
+        &self,
+        u_s_mm: f64,
+        value: impl Fn(&CurvePoint) -> f64,
+    ) -> Option<f64> {
+        let pts: Vec<&CurvePoint> = self.points.iter().filter(|q| q.a_mm > 0.0).collect();
+        let k = pts.partition_point(|q| q.u_s_mm < u_s_mm);
+        if k == 0 || k == pts.len() {
+            return None;
+        }
+        let (q0, q1) = (pts[k - 1], pts[k]);
+        let t = (u_s_mm - q0.u_s_mm) / (q1.u_s_mm - q0.u_s_mm);
+        Some(value(q0) + t * (value(q1) - value(q0)))
+    }
+}

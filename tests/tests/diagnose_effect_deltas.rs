@@ -37,14 +37,7 @@ fn converged(e: f64, p: f64, effect: impl Fn(&mut CurveParams)) -> Curve {
 /// `value`(u_s) of a curve, linear between its steps (None outside them or before
 /// contact).
 fn value_at(c: &Curve, u: f64, value: impl Fn(&CurvePoint) -> f64) -> Option<f64> {
-    let pts: Vec<_> = c.points.iter().filter(|q| q.a_mm > 0.0).collect();
-    let k = pts.partition_point(|q| q.u_s_mm < u);
-    if k == 0 || k == pts.len() {
-        return None;
-    }
-    let (q0, q1) = (pts[k - 1], pts[k]);
-    let t = (u - q0.u_s_mm) / (q1.u_s_mm - q0.u_s_mm);
-    Some(value(q0) + t * (value(q1) - value(q0)))
+    c.in_contact_at_u_s(u, value)
 }
 
 /// a(u_s) of a curve ([`value_at`]).
