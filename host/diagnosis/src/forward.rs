@@ -246,6 +246,15 @@ pub struct ForwardStep {
     pub joint_delta_chi2: Option<f64>,
     pub joint_threshold_chi2: Option<f64>,
     pub passed_on_both_channels: bool,
+    /// When the effect passed on both channels: the other effects that passed on both
+    /// channels at this step and were confirmed by their held-out check, with their joint
+    /// chi^2 (the added effect's is `joint_chi2`). What the loads alone let in, another
+    /// effect that shifts the loads may explain nearly as well (behind a camera scale,
+    /// friction and a manometer offset: docs/diagnosis.md, Method, step 7).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub also_passed_on_both_channels: Vec<Alternative>,
+    /// The added effect's joint chi^2 (radius and load), when it was fitted to both.
+    pub joint_chi2: Option<f64>,
     /// Held-out gain and its calibrated margin.
     pub held_out_gain: Option<f64>,
     pub held_out_margin: Option<f64>,
@@ -254,6 +263,33 @@ pub struct ForwardStep {
     pub after: GapSummary,
     /// chi^2/dof before over after (the gap measure of the single-effect report).
     pub gap_shrink: f64,
+}
+
+/// Another effect that passed at a step on both channels.
+#[derive(Debug, Clone, Serialize)]
+pub struct Alternative {
+    pub effect: String,
+    pub label: String,
+    pub parameters: serde_json::Value,
+    pub joint_chi2: f64,
+}
+
+/// The fit a step adds its effect at: the radius refit, or for an effect that passed on
+/// both channels (the radius barely sees it) the fit to both channels, whose parameters
+/// the loads determine, with its chi^2, points and whitened values those of the radius at
+/// those parameters (the gap the report compares is the radius's).
+fn step_fit(w: &Screened, whitener: &Whitener, n: usize) -> Option<GlsFit> {
+    if w.passes_joint_threshold
+        && let Some(jf) = &w.joint_fit
+    {
+        let mut f = jf.clone();
+        f.whitened = whitener.whiten(&jf.residuals_mm);
+        f.chi2 = f.whitened.iter().map(|v| v * v).sum();
+        f.points = n;
+        f.chi2_per_dof = f.chi2 / n.saturating_sub(f.parameters).max(1) as f64;
+        return Some(f);
+    }
+    w.fit.clone()
 }
 
 /// Why the search stopped.
@@ -474,25 +510,10 @@ pub fn run(
     let primary = search(
         model, cands, points, subset, noise, whitener, options, first,
     );
-    let Some(tried) = look_ahead_candidate(first) else {
+    let starts = look_ahead_candidates(first);
+    if starts.is_empty() {
         return primary;
-    };
-    let mut from_tried = first.clone();
-    from_tried.decision = Decision {
-        verdict: Verdict::Effect,
-        winner: Some(tried),
-        group: Vec::new(),
-    };
-    let alternative = search(
-        model,
-        cands,
-        points,
-        subset,
-        noise,
-        whitener,
-        options,
-        &from_tried,
-    );
+    }
     // each effect must buy at least the step's calibrated threshold of chi^2 over both
     // channels (the largest improvement a candidate reaches on noise alone, 95 %)
     let penalty = first.threshold.delta_chi2_95;
@@ -510,41 +531,114 @@ pub fn run(
         };
         total.map(|c| c + penalty * f.effects.len() as f64)
     };
-    let (primary_score, alternative_score) = (score(&primary), score(&alternative));
-    let accepted = alternative.effects.len() >= 2
-        && alternative.stop.verdict != Verdict::Unexplained
-        && alternative.consistency.as_ref().is_none_or(|c| c.agree)
-        && matches!((alternative_score, primary_score), (Some(a), Some(p)) if a < p);
-    let record = LookAhead {
-        tried: first.screened[tried].label.clone(),
-        primary: primary.effects.iter().map(|e| e.label.clone()).collect(),
-        alternative: alternative
-            .effects
-            .iter()
-            .map(|e| e.label.clone())
-            .collect(),
-        primary_score,
-        alternative_score,
-        penalty_per_effect: penalty,
-        accepted,
-        winner: tried,
-    };
-    let mut chosen = if accepted { alternative } else { primary };
-    chosen.look_ahead = Some(record);
-    chosen
+    let primary_score = score(&primary);
+    // the search from each start; the best-scoring one that is accepted replaces the
+    // first search, else the first start's record is kept
+    let mut best: Option<(ForwardSelection, LookAhead)> = None;
+    let mut first_record: Option<LookAhead> = None;
+    for (tried, why) in starts {
+        let mut from_tried = first.clone();
+        from_tried.decision = Decision {
+            verdict: Verdict::Effect,
+            winner: Some(tried),
+            group: Vec::new(),
+        };
+        let alternative = search(
+            model,
+            cands,
+            points,
+            subset,
+            noise,
+            whitener,
+            options,
+            &from_tried,
+        );
+        let alternative_score = score(&alternative);
+        let accepted = alternative.effects.len() >= 2
+            && alternative.stop.verdict != Verdict::Unexplained
+            && alternative.consistency.as_ref().is_none_or(|c| c.agree)
+            && matches!((alternative_score, primary_score), (Some(a), Some(p)) if a < p);
+        let record = LookAhead {
+            why: why.replace("{}", &first.screened[tried].label),
+            tried: first.screened[tried].label.clone(),
+            primary: primary.effects.iter().map(|e| e.label.clone()).collect(),
+            alternative: alternative
+                .effects
+                .iter()
+                .map(|e| e.label.clone())
+                .collect(),
+            primary_score,
+            alternative_score,
+            penalty_per_effect: penalty,
+            accepted,
+            winner: tried,
+        };
+        if first_record.is_none() {
+            first_record = Some(record.clone());
+        }
+        let better = best.as_ref().is_none_or(|(_, b)| {
+            matches!((alternative_score, b.alternative_score), (Some(a), Some(p)) if a < p)
+        });
+        if accepted && better {
+            best = Some((alternative, record));
+        }
+    }
+    match best {
+        Some((mut chosen, record)) => {
+            chosen.look_ahead = Some(record);
+            chosen
+        }
+        None => {
+            let mut chosen = primary;
+            chosen.look_ahead = first_record;
+            chosen
+        }
+    }
 }
 
-/// The step-1 candidate the search is also tried from: the one with the largest radius
-/// refit gain among those that pass the threshold, when it is not step 1's best (the effect
-/// named first, or the best of an `unexplained` step, if it has one) but fits the radius
-/// better, and its held-out radius prediction is better than the baseline's: either the
-/// loads alone kept it out (its held-out load prediction worse than the baseline's) or it
-/// passed and lost the ranking over both channels. Only when step 1's verdict is not `none`:
-/// on data the baseline explains, nothing is tried.
-fn look_ahead_candidate(first: &StepOutcome) -> Option<usize> {
+/// Where the search is also started from ([`run`]): step 1's best radius fit when it was
+/// not step 1's choice ([`best_radius_fit_not_chosen`]), and step 1's best when its
+/// verdict is `unexplained` ([`unexplained_winner`]); nothing when step 1's verdict is
+/// `none` (on data the baseline explains, nothing is tried).
+fn look_ahead_candidates(first: &StepOutcome) -> Vec<(usize, &'static str)> {
     if first.decision.verdict == Verdict::None {
-        return None;
+        return Vec::new();
     }
+    let mut out = Vec::new();
+    if let Some(i) = best_radius_fit_not_chosen(first) {
+        out.push((i, "step 1's best radius fit, {}, was not its choice"));
+    }
+    if let Some(i) = unexplained_winner(first)
+        && out.iter().all(|(j, _)| *j != i)
+    {
+        out.push((
+            i,
+            "step 1's best, {}, left a misfit no single effect removes",
+        ));
+    }
+    out
+}
+
+/// Step 1's best when its verdict is `unexplained` (the best single effect passes and is
+/// confirmed, but leaves a significant misfit): the search that stops there is also run
+/// with it added, since what one effect leaves may be a second's (friction behind a
+/// camera scale that fits the radius as well as friction does).
+fn unexplained_winner(first: &StepOutcome) -> Option<usize> {
+    let w = first.decision.winner?;
+    let s = &first.screened[w];
+    (first.decision.verdict == Verdict::Unexplained
+        && s.passes_threshold
+        && s.held_out.as_ref().is_some_and(|h| h.confirms))
+    .then_some(w)
+}
+
+/// The look-ahead's first start ([`look_ahead_candidates`]): the step-1 candidate with the
+/// largest radius refit gain among those that pass the threshold, when it is not step 1's
+/// best (the effect named first, or the best of an `unexplained` step, if it has one) but
+/// fits the radius better, and its held-out radius prediction is better than the
+/// baseline's: either the loads alone kept it out (its held-out load prediction worse than
+/// the baseline's) or it passed and lost the ranking over both channels.
+fn best_radius_fit_not_chosen(first: &StepOutcome) -> Option<usize> {
     let named_first = first.decision.winner.map(|w| &first.screened[w]);
     let winner_gain = named_first.map_or(Some(0.0), |w| w.delta_chi2)?;
     let (best, s) = first
@@ -574,6 +668,8 @@ fn look_ahead_candidate(first: &StepOutcome) -> Option<usize> {
 /// ([`run`]).
 #[derive(Debug, Clone, Serialize)]
 pub struct LookAhead {
+    /// Why it was tried.
+    pub why: String,
     /// The candidate the search was also started from.
     pub tried: String,
     /// The effects of the search as step 1 decided, and of the search from `tried`.
@@ -643,7 +739,7 @@ fn search(
             );
         }
         let w = &outcome.screened[wi];
-        let Some(f) = w.fit.clone() else {
+        let Some(f) = step_fit(w, whitener, subset.len()) else {
             break stop_of(&outcome, "the named candidate has no refit");
         };
         let before = if steps.is_empty() {
@@ -685,6 +781,34 @@ fn search(
             joint_delta_chi2: w.delta_joint_chi2,
             joint_threshold_chi2: outcome.joint_threshold.as_ref().map(|t| t.delta_chi2_95),
             passed_on_both_channels: w.passes_joint_threshold,
+            also_passed_on_both_channels: if w.passes_joint_threshold {
+                outcome
+                    .screened
+                    .iter()
+                    .filter(|s| {
+                        s.passes_joint_threshold
+                            && s.candidate.kind != w.candidate.kind
+                            && s.held_out.as_ref().is_some_and(|h| h.confirms)
+                    })
+                    .filter_map(|s| {
+                        let j = s.joint_fit.as_ref()?;
+                        Some(Alternative {
+                            effect: s.effect.clone(),
+                            label: s.label.clone(),
+                            parameters: parameter_map(&s.candidate, j.theta, j.theta_se),
+                            joint_chi2: j.chi2,
+                        })
+                    })
+                    .fold(Vec::new(), |mut v: Vec<Alternative>, a| {
+                        if !v.iter().any(|b| b.effect == a.effect) {
+                            v.push(a);
+                        }
+                        v
+                    })
+            } else {
+                Vec::new()
+            },
+            joint_chi2: w.joint_fit.as_ref().map(|j| j.chi2),
             held_out_gain: w.held_out.as_ref().map(selection::HeldOut::gain),
             held_out_margin: w.held_out.as_ref().map(|h| h.margin_chi2),
             gap_shrink: before.chi2_per_dof / after.chi2_per_dof.max(1e-300),

@@ -343,10 +343,38 @@ fn parameters_inline(p: &serde_json::Value) -> String {
         .join(", ")
 }
 
+/// The look-ahead's line of the forward selection.
+fn look_ahead_text(s: &mut String, l: &crate::forward::LookAhead) {
+    let score = |v: Option<f64>| v.map_or("-".into(), |v| format!("{v:.1}"));
+    let list = |v: &[String]| {
+        if v.is_empty() {
+            "nothing".to_string()
+        } else {
+            v.join(" + ")
+        }
+    };
+    let _ = writeln!(
+        s,
+        "  look-ahead: {}; the search from it found {} (score {}) against {} (score {}; chi2 of both channels plus {:.1} per effect): {}",
+        l.why,
+        list(&l.alternative),
+        score(l.alternative_score),
+        list(&l.primary),
+        score(l.primary_score),
+        l.penalty_per_effect,
+        if l.accepted { "kept" } else { "not kept" }
+    );
+}
+
 /// The forward selection's steps, stop and final model.
 fn forward_text(s: &mut String, d: &Diagnosis) {
     let f = &d.forward;
     if f.steps.is_empty() {
+        // a look-ahead that was tried and not kept is still worth its line
+        if let Some(l) = &f.look_ahead {
+            let _ = writeln!(s, "\nforward selection: nothing added");
+            look_ahead_text(s, l);
+        }
         return;
     }
     let _ = writeln!(
@@ -374,6 +402,16 @@ fn forward_text(s: &mut String, d: &Diagnosis) {
                 } else {
                     ""
                 }
+            );
+        }
+        for a in &st.also_passed_on_both_channels {
+            let _ = writeln!(
+                s,
+                "          also passed on both channels: {} {} (joint chi2 {:.1} against {})",
+                a.label,
+                parameters_inline(&a.parameters),
+                a.joint_chi2,
+                st.joint_chi2.map_or("-".into(), |c| format!("{c:.1}")),
             );
         }
         for r in &st.refitted {
@@ -405,25 +443,7 @@ fn forward_text(s: &mut String, d: &Diagnosis) {
         }
     );
     if let Some(l) = &f.look_ahead {
-        let score = |v: Option<f64>| v.map_or("-".into(), |v| format!("{v:.1}"));
-        let list = |v: &[String]| {
-            if v.is_empty() {
-                "nothing".to_string()
-            } else {
-                v.join(" + ")
-            }
-        };
-        let _ = writeln!(
-            s,
-            "  look-ahead: step 1's best radius fit, {}, was not its choice; the search from it found {} (score {}) against {} (score {}; chi2 of both channels plus {:.1} per effect): {}",
-            l.tried,
-            list(&l.alternative),
-            score(l.alternative_score),
-            list(&l.primary),
-            score(l.primary_score),
-            l.penalty_per_effect,
-            if l.accepted { "kept" } else { "not kept" }
-        );
+        look_ahead_text(s, l);
     }
     // grouped by the included effect and the reason
     let mut groups: Vec<(&str, &str, Vec<&str>)> = Vec::new();

@@ -519,7 +519,9 @@ impl Screened {
 
 /// Screens every candidate and fully refits the best `refit` (always including the best
 /// variant of each effect among them) and every further one whose screening gain passes
-/// the threshold.
+/// the threshold; with a `joint_threshold` (a forward step after the first, with loads)
+/// every candidate, each also fitted to both channels, since one may pass on its joint
+/// gain alone.
 #[allow(clippy::too_many_arguments)]
 pub fn screen_and_refit(
     model: &Model<'_>,
@@ -568,8 +570,13 @@ pub fn screen_and_refit(
     for s in out.iter_mut() {
         // the best `refit` effects, and every further one whose linearised gain alone
         // passes the threshold: an effect the radius shows little of, such as friction on
-        // a converged mesh, can screen fourth and still be the one the loads need
-        if refitted_kinds.len() >= refit && s.screen_delta_chi2 <= threshold {
+        // a converged mesh, can screen fourth and still be the one the loads need; at a
+        // later step with loads, all of them (behind an included camera scale friction
+        // shows almost only in the loads: radius gain 3.4 against a threshold of 7.0)
+        if refitted_kinds.len() >= refit
+            && s.screen_delta_chi2 <= threshold
+            && joint_threshold.is_none()
+        {
             break;
         }
         if refitted_kinds.contains(&s.candidate.kind) && s.candidate.tau_h_mm.is_none() {
@@ -610,10 +617,12 @@ pub fn screen_and_refit(
                     .unwrap_or(lc.baseline_chi2);
                 s.load_chi2 = Some(l);
                 s.delta_load_chi2 = Some(lc.baseline_chi2 - l);
-                // the joint fit ranks the candidates that may pass (the same gate as the
-                // held-out check's); those far below the threshold are never named
+                // the joint fit ranks the candidates that may pass: at step 1 those whose
+                // radius gain reaches half the threshold (the held-out check's gate; the
+                // loads never make a first effect out of nothing), at a later step every
+                // candidate, which may pass on its joint gain against the joint threshold
                 if let Some(j) = joint
-                    && d > 0.5 * threshold
+                    && (d > 0.5 * threshold || joint_threshold.is_some())
                     && let Some(bj) = joint_base
                         .get_or_insert_with(|| {
                             fit_to(
