@@ -156,15 +156,14 @@ fn friction_and_a_camera_scale_over_seeds() {
     assert!(failed.is_empty(), "{failed:?}");
 }
 
-/// Friction and a camera scale where step 1 alone goes wrong: the camera scale fits the
-/// radius best (refit gain 833 against relaxation's 580 here) but, without the friction
-/// that raises the loads, its modulus predicts them worse than the baseline, so its held-out
-/// check fails and viscoelastic relaxation, which leaves the loads alone, was named instead
-/// (alone, E2 156 kPa for 170, a misfit left). The search is then also tried from the
-/// camera scale (the look-ahead, `forward::run`): it finds friction next, and that model
-/// explains both channels far better (chi2 of both plus the threshold per effect: 671
-/// against 1824), so it is kept. Seeds 25-27 and sizes mu 0.3-0.4, scale 2-3 % named
-/// relaxation first before; with the look-ahead all six seeds and sizes tried name the pair.
+/// Friction and a camera scale where step 1 alone goes wrong: no single effect explains
+/// both channels (friction, the best over both, leaves a misfit: verdict `unexplained`;
+/// the camera scale fits the radius best but, without the friction that raises the loads,
+/// its modulus predicts them worse than the baseline). The search is then also tried from
+/// the camera scale and from friction (the look-ahead, `forward::run`); each finds the
+/// other effect next (friction behind the scale on its gain over both channels), and the
+/// better-scoring pair (chi2 of both channels plus the threshold per effect: 678 from
+/// friction, 685 from the scale, against 2519 for the baseline) is kept.
 #[test]
 fn friction_and_a_camera_scale_are_both_named_where_the_loads_kept_the_scale_out_of_step_one() {
     let fr = (EffectKind::Friction, 0.4);
@@ -176,8 +175,12 @@ fn friction_and_a_camera_scale_are_both_named_where_the_loads_kept_the_scale_out
         .look_ahead
         .as_ref()
         .expect("the look-ahead was tried");
-    assert!(l.accepted && l.tried == "radius_scale", "{l:?}");
-    assert_eq!(d.effect.as_deref(), Some("radius_scale"));
+    assert!(l.accepted, "{l:?}");
+    assert!(
+        matches!(l.tried.as_str(), "radius_scale" | "friction"),
+        "{l:?}"
+    );
+    assert_eq!(d.effect.as_deref(), Some(l.tried.as_str()));
 }
 
 #[test]
