@@ -135,6 +135,39 @@ fn friction_and_a_camera_scale_are_both_named() {
     let sc = (EffectKind::RadiusScale, 0.03);
     let d = run(&[fr, sc], 22);
     check_pair(&d, fr, sc);
+    // friction came in on its gain over both channels, not on the radius's
+    let at = d
+        .forward
+        .steps
+        .iter()
+        .position(|s| s.effect == "friction")
+        .expect("friction's step");
+    let step = &d.forward.steps[at];
+    assert!(step.passed_on_both_channels, "{step:?}");
+    assert!(step.delta_chi2 < step.threshold_chi2, "{step:?}");
+    let (gain, threshold) = (
+        step.joint_delta_chi2.expect("joint gain"),
+        step.joint_threshold_chi2.expect("joint threshold"),
+    );
+    assert!(gain > threshold, "joint gain {gain} vs {threshold}");
+    // the other effects that passed on both channels are listed, none of them in the model
+    // already, each fitting both channels worse than friction (the step adds the best)
+    let joint = step.joint_chi2.expect("friction's joint chi2");
+    assert!(!step.also_passed_on_both_channels.is_empty());
+    for alt in &step.also_passed_on_both_channels {
+        assert!(
+            !matches!(alt.effect.as_str(), "friction" | "radius_scale"),
+            "{alt:?}"
+        );
+        assert!(alt.joint_chi2 > joint, "{alt:?} against friction's {joint}");
+    }
+    let json = serde_json::to_value(&d).expect("json");
+    let listed = &json["forward"]["steps"][at]["also_passed_on_both_channels"];
+    assert_eq!(
+        listed.as_array().map(Vec::len),
+        Some(step.also_passed_on_both_channels.len()),
+        "{listed}"
+    );
 }
 
 /// The same pair over more seeds and both friction sizes of the table's upper half.
