@@ -510,7 +510,7 @@ pub fn run(
     let primary = search(
         model, cands, points, subset, noise, whitener, options, first,
     );
-    let starts = look_ahead_candidates(first);
+    let starts = look_ahead_candidates(&first.decision, &first.screened);
     if starts.is_empty() {
         return primary;
     }
@@ -600,15 +600,15 @@ pub fn run(
 /// not step 1's choice ([`best_radius_fit_not_chosen`]), and step 1's best when its
 /// verdict is `unexplained` ([`unexplained_winner`]); nothing when step 1's verdict is
 /// `none` (on data the baseline explains, nothing is tried).
-fn look_ahead_candidates(first: &StepOutcome) -> Vec<(usize, &'static str)> {
-    if first.decision.verdict == Verdict::None {
+fn look_ahead_candidates(decision: &Decision, screened: &[Screened]) -> Vec<(usize, &'static str)> {
+    if decision.verdict == Verdict::None {
         return Vec::new();
     }
     let mut out = Vec::new();
-    if let Some(i) = best_radius_fit_not_chosen(first) {
+    if let Some(i) = best_radius_fit_not_chosen(decision, screened) {
         out.push((i, "step 1's best radius fit, {}, was not its choice"));
     }
-    if let Some(i) = unexplained_winner(first)
+    if let Some(i) = unexplained_winner(decision, screened)
         && out.iter().all(|(j, _)| *j != i)
     {
         out.push((
@@ -623,10 +623,10 @@ fn look_ahead_candidates(first: &StepOutcome) -> Vec<(usize, &'static str)> {
 /// confirmed, but leaves a significant misfit): the search that stops there is also run
 /// with it added, since what one effect leaves may be a second's (friction behind a
 /// camera scale that fits the radius as well as friction does).
-fn unexplained_winner(first: &StepOutcome) -> Option<usize> {
-    let w = first.decision.winner?;
-    let s = &first.screened[w];
-    (first.decision.verdict == Verdict::Unexplained
+fn unexplained_winner(decision: &Decision, screened: &[Screened]) -> Option<usize> {
+    let w = decision.winner?;
+    let s = screened.get(w)?;
+    (decision.verdict == Verdict::Unexplained
         && s.passes_threshold
         && s.held_out.as_ref().is_some_and(|h| h.confirms))
     .then_some(w)
@@ -638,11 +638,10 @@ fn unexplained_winner(first: &StepOutcome) -> Option<usize> {
 /// fits the radius better, and its held-out radius prediction is better than the
 /// baseline's: either the loads alone kept it out (its held-out load prediction worse than
 /// the baseline's) or it passed and lost the ranking over both channels.
-fn best_radius_fit_not_chosen(first: &StepOutcome) -> Option<usize> {
-    let named_first = first.decision.winner.map(|w| &first.screened[w]);
+fn best_radius_fit_not_chosen(decision: &Decision, screened: &[Screened]) -> Option<usize> {
+    let named_first = decision.winner.and_then(|w| screened.get(w));
     let winner_gain = named_first.map_or(Some(0.0), |w| w.delta_chi2)?;
-    let (best, s) = first
-        .screened
+    let (best, s) = screened
         .iter()
         .enumerate()
         .filter(|(_, s)| s.passes_threshold && s.fit.is_some())
@@ -992,5 +991,144 @@ fn search(
         modulus_after_kpa,
         final_total_chi2,
         look_ahead: None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    //! Where the look-ahead starts, on step-1 outcomes written out by hand: each start's
+    //! rule alone, both together, and the cases that must start nothing.
+
+    use super::*;
+    use crate::selection::HeldOut;
+
+    fn fit(delta_chi2: f64) -> GlsFit {
+        GlsFit {
+            modulus_kpa: 170.0,
+            ci95_kpa: [165.0, 175.0],
+            theta: 0.0,
+            theta_se: 0.0,
+            included: Vec::new(),
+            included_se: Vec::new(),
+            chi2: 400.0 - delta_chi2,
+            points: 400,
+            parameters: 2,
+            chi2_per_dof: (400.0 - delta_chi2) / 398.0,
+            rms_residual_mm: 0.005,
+            residuals_mm: Vec::new(),
+            whitened: Vec::new(),
+            covariance: Vec::new(),
+            iterations: 3,
+        }
+    }
+
+    /// A held-out check: the radius predicted by the candidate with chi^2 `radius` against
+    /// the baseline's 100, the loads with `load` against the baseline's 200.
+    fn held_out(radius: f64, load: f64, confirms: bool) -> HeldOut {
+        HeldOut {
+            scheme: "by depth".into(),
+            baseline_chi2: 100.0,
+            candidate_chi2: radius,
+            points: 200,
+            load_baseline_chi2: Some(200.0),
+            load_candidate_chi2: Some(load),
+            load_points: 200,
+            margin_chi2: 1.0,
+            confirms,
+        }
+    }
+
+    /// A refitted candidate with radius gain `gain` against a threshold of 7.
+    fn screened(kind: EffectKind, gain: f64, held: HeldOut) -> Screened {
+        let candidate = Candidate {
+            kind,
+            tau_h_mm: None,
+        };
+        Screened {
+            effect: kind.name().into(),
+            label: candidate.label(),
+            candidate,
+            screen_delta_chi2: gain,
+            fit: Some(fit(gain)),
+            delta_chi2: Some(gain),
+            aic: None,
+            bic: None,
+            held_out: Some(held),
+            passes_threshold: gain > 7.0,
+            load_chi2: None,
+            delta_load_chi2: None,
+            joint_fit: None,
+            delta_joint_chi2: None,
+            passes_joint_threshold: false,
+        }
+    }
+
+    fn decision(verdict: Verdict, winner: Option<usize>) -> Decision {
+        Decision {
+            verdict,
+            winner,
+            group: Vec::new(),
+        }
+    }
+
+    fn starts(decision: &Decision, screened: &[Screened]) -> Vec<usize> {
+        look_ahead_candidates(decision, screened)
+            .into_iter()
+            .map(|(i, _)| i)
+            .collect()
+    }
+
+    #[test]
+    fn an_unexplained_step_one_is_looked_ahead_from_its_best() {
+        // friction passes and is confirmed but leaves a misfit; nothing else passes
+        let s = [
+            screened(EffectKind::Friction, 12.0, held_out(80.0, 150.0, true)),
+            screened(EffectKind::RadiusScale, 3.0, held_out(95.0, 210.0, false)),
+        ];
+        let d = decision(Verdict::Unexplained, Some(0));
+        let out = look_ahead_candidates(&d, &s);
+        assert_eq!(out.len(), 1, "{out:?}");
+        assert_eq!(out[0].0, 0);
+        assert!(out[0].1.contains("misfit"), "{}", out[0].1);
+        // not when its held-out check does not confirm it, nor when step 1 named nothing
+        let unconfirmed = [screened(
+            EffectKind::Friction,
+            12.0,
+            held_out(80.0, 150.0, false),
+        )];
+        assert!(starts(&d, &unconfirmed).is_empty());
+        assert!(starts(&decision(Verdict::None, None), &s).is_empty());
+    }
+
+    #[test]
+    fn a_better_radius_fit_the_loads_kept_out_is_a_start() {
+        // relaxation named; the camera scale fits the radius far better and predicts the
+        // held-out radius better, but its loads worse than the baseline's
+        let s = [
+            screened(EffectKind::Viscoelastic, 10.0, held_out(90.0, 190.0, true)),
+            screened(EffectKind::RadiusScale, 60.0, held_out(40.0, 900.0, false)),
+        ];
+        let out = look_ahead_candidates(&decision(Verdict::Effect, Some(0)), &s);
+        assert_eq!(out.len(), 1, "{out:?}");
+        assert_eq!(out[0].0, 1);
+        assert!(out[0].1.contains("best radius fit"), "{}", out[0].1);
+        // a better radius gain whose held-out radius prediction is no better than the
+        // baseline's is not a start
+        let overfit = [
+            s[0].clone(),
+            screened(EffectKind::RadiusScale, 60.0, held_out(120.0, 900.0, false)),
+        ];
+        assert!(starts(&decision(Verdict::Effect, Some(0)), &overfit).is_empty());
+        // nor is the named effect itself, however large its gain
+        assert!(starts(&decision(Verdict::Effect, Some(1)), &s).is_empty());
+    }
+
+    #[test]
+    fn both_starts_are_tried_best_radius_fit_first() {
+        let s = [
+            screened(EffectKind::Friction, 12.0, held_out(80.0, 150.0, true)),
+            screened(EffectKind::RadiusScale, 60.0, held_out(40.0, 900.0, false)),
+        ];
+        assert_eq!(starts(&decision(Verdict::Unexplained, Some(0)), &s), [1, 0]);
     }
 }
