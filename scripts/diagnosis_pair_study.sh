@@ -30,7 +30,7 @@ for s in "${seeds[@]}"; do
     verdict=$(echo "$report" | grep -m1 '^verdict:' | sed 's/^verdict: //' || true)
     model=$(echo "$report" | grep -m1 '^  final model:' | sed 's/^  final model: //; s/ ([^()]*)//g' || true)
     e2=$(echo "$report" | grep -m1 'kPa (.*) after, ' | sed 's/^ *E2 = \([0-9.]*\) kPa.*/\1/' || true)
-    look=$(echo "$report" | grep -m1 '^  look-ahead:' | sed 's/.*: \(kept\|not kept\)$/look-ahead \1/' || true)
+    look=$(echo "$report" | grep -m1 '^  look-ahead:' | sed -E 's/.*: (kept|not kept)( \(.*\))?$/look-ahead \1/' || true)
     both=$(echo "$report" | grep -m1 'explains both within their noise:' | sed 's/.*explains both within their noise: //; s/); /)\n/g' | sed -E 's/^(.*) \(([a-z_]+) = ([-0-9.]+).* joint chi2 ([0-9.]+) on [0-9]+ values, p = [0-9.]+(; tube travel under it: chi2 ([0-9.]+) on [0-9]+ values, p ([=<]) ([0-9.]+))?.*/\1 \3 (chi2 \4; travel chi2 \6 (p \7 \8))/; s/; travel chi2  \(p  \)\)/)/' | paste -sd, - | sed 's/,/, /g' || true)
     echo "$case seed $s: $verdict | ${model:-nothing added} | E2 ${e2:--} kPa (true 170)${look:+ | $look}${both:+ | both channels: $both}"
 done

@@ -554,9 +554,20 @@ pub fn run(
             &from_tried,
         );
         let alternative_score = score(&alternative);
+        let weak_effect = weakest_effect(
+            &alternative.effects,
+            cands,
+            alternative.consistency.as_ref(),
+        )
+        .filter(|(_, z)| z * z < penalty)
+        .map(|(label, z)| WeakEffect {
+            label,
+            standard_errors: z,
+        });
         let accepted = alternative.effects.len() >= 2
             && alternative.stop.verdict != Verdict::Unexplained
             && alternative.consistency.as_ref().is_none_or(|c| c.agree)
+            && weak_effect.is_none()
             && matches!((alternative_score, primary_score), (Some(a), Some(p)) if a < p);
         let record = LookAhead {
             why: why.replace("{}", &first.screened[tried].label),
@@ -570,6 +581,7 @@ pub fn run(
             primary_score,
             alternative_score,
             penalty_per_effect: penalty,
+            weak_effect,
             accepted,
             winner: tried,
         };
@@ -594,6 +606,47 @@ pub fn run(
             chosen
         }
     }
+}
+
+/// The effect of `effects` (a final model) closest to none: its label and how many standard
+/// errors its parameter lies from the value that means no effect (0 for every effect of
+/// the library). The parameter is read from both channels where the channel check has
+/// them (`consistency`: the radius part's and the load-given-radius part's readings, which
+/// are independent by construction, combined by inverse variance: friction's is the load's,
+/// a camera scale's the radius's), else from the final model's fit. None without a
+/// parameter and standard error to read.
+fn weakest_effect(
+    effects: &[NamedEffect],
+    cands: &[Candidate],
+    consistency: Option<&ChannelConsistency>,
+) -> Option<(String, f64)> {
+    effects
+        .iter()
+        .filter_map(|e| {
+            let both = consistency
+                .and_then(|c| c.parameters.iter().find(|p| p.effect == e.label))
+                .and_then(|p| {
+                    let w1 = 1.0 / (p.radius_se * p.radius_se);
+                    let w2 = 1.0 / (p.load_given_radius_se * p.load_given_radius_se);
+                    let w = w1 + w2;
+                    (w.is_finite() && w > 0.0).then(|| {
+                        (
+                            (w1 * p.radius + w2 * p.load_given_radius) / w,
+                            w.sqrt().recip(),
+                        )
+                    })
+                });
+            let (value, se) = match both {
+                Some(v) => v,
+                None => {
+                    let kind = cands.iter().find(|c| c.label() == e.label)?.kind;
+                    let p = e.parameters.get(kind.parameter().0)?;
+                    (p.get("value")?.as_f64()?, p.get("se")?.as_f64()?)
+                }
+            };
+            (se > 0.0).then(|| (e.label.clone(), (value / se).abs()))
+        })
+        .min_by(|a, b| a.1.total_cmp(&b.1))
 }
 
 /// Where the search is also started from ([`run`]): step 1's best radius fit when it was
@@ -679,12 +732,28 @@ pub struct LookAhead {
     pub primary_score: Option<f64>,
     pub alternative_score: Option<f64>,
     pub penalty_per_effect: f64,
+    /// An effect of the search from `tried` that its final model does not need: its
+    /// parameter fewer than sqrt(`penalty_per_effect`) standard errors from none (the Wald
+    /// form of what each effect must buy). Such a search is not kept, whatever its score:
+    /// a start the rest of the search made redundant (a camera scale refitted to 0.0002 ±
+    /// 0.0006 beside friction) lowers the score only through how its fit was reached.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub weak_effect: Option<WeakEffect>,
     /// Whether the search from `tried` is the one reported (it names at least two effects,
-    /// leaves no unexplained misfit, its radius and load agree, and it scores lower).
+    /// each needed by its final model, leaves no unexplained misfit, its radius and load
+    /// agree, and it scores lower).
     pub accepted: bool,
     /// Index of `tried` among step 1's screened candidates.
     #[serde(skip)]
     pub winner: usize,
+}
+
+/// An effect a final model does not need ([`LookAhead::weak_effect`]).
+#[derive(Debug, Clone, Serialize)]
+pub struct WeakEffect {
+    pub label: String,
+    /// |parameter| over its standard error.
+    pub standard_errors: f64,
 }
 
 /// [`run`] without the look-ahead.

@@ -362,7 +362,16 @@ fn look_ahead_text(s: &mut String, l: &crate::forward::LookAhead) {
         list(&l.primary),
         score(l.primary_score),
         l.penalty_per_effect,
-        if l.accepted { "kept" } else { "not kept" }
+        match (&l.weak_effect, l.accepted) {
+            (_, true) => "kept".to_string(),
+            (Some(w), false) => format!(
+                "not kept ({} is {:.1} standard errors from none there, fewer than {:.1})",
+                w.label,
+                w.standard_errors,
+                l.penalty_per_effect.sqrt()
+            ),
+            (None, false) => "not kept".to_string(),
+        }
     );
 }
 
