@@ -154,6 +154,15 @@ pub fn table_parameter_error(kind: EffectKind) -> f64 {
 }
 
 /// The test's outcome.
+/// An included effect's parameter fitted to both channels together.
+#[derive(Debug, Clone, Serialize)]
+pub struct JointParameter {
+    /// The effect's label.
+    pub effect: String,
+    pub value: f64,
+    pub se: f64,
+}
+
 #[derive(Debug, Clone, Serialize)]
 pub struct ChannelConsistency {
     /// The model tested ("baseline + " its effects).
@@ -188,6 +197,9 @@ pub struct ChannelConsistency {
     pub agree: bool,
     /// The included effects' parameters in the two parts (every parameter free in each).
     pub parameters: Vec<ParameterAgreement>,
+    /// Every included effect's parameter in the fit of both channels together (every
+    /// parameter free).
+    pub joint_parameters: Vec<JointParameter>,
     /// Channel x pressure x depth windows of the residuals at the joint fit's parameters
     /// (flagged ones say where the model leaves the data).
     pub cells: Vec<Cell>,
@@ -427,6 +439,18 @@ pub fn check(
         p_value,
         agree: agree(modulus_p_value, &parameters),
         parameters,
+        joint_parameters: model
+            .included
+            .iter()
+            .enumerate()
+            .filter_map(|(j, (c, _))| {
+                Some(JointParameter {
+                    effect: c.label(),
+                    value: *whole.included.get(j)?,
+                    se: *whole.included_se.get(j)?,
+                })
+            })
+            .collect(),
         cells,
     })
 }
