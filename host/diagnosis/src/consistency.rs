@@ -153,7 +153,6 @@ pub fn table_parameter_error(kind: EffectKind) -> f64 {
     }
 }
 
-/// The test's outcome.
 /// An included effect's parameter fitted to both channels together.
 #[derive(Debug, Clone, Serialize)]
 pub struct JointParameter {
@@ -163,6 +162,7 @@ pub struct JointParameter {
     pub se: f64,
 }
 
+/// The test's outcome.
 #[derive(Debug, Clone, Serialize)]
 pub struct ChannelConsistency {
     /// The model tested ("baseline + " its effects).

@@ -26,7 +26,7 @@
 use serde::Serialize;
 
 use super::candidates::{Candidate, EffectKind, incompatibility};
-use super::consistency::{self, ChannelConsistency};
+use super::consistency::{self, ChannelConsistency, JointParameter};
 use super::data::Point;
 use super::fitting::GlsFit;
 use super::load_channel::LoadChannel;
@@ -557,7 +557,10 @@ pub fn run(
         let weak_effect = weakest_effect(
             &alternative.effects,
             cands,
-            alternative.consistency.as_ref(),
+            alternative
+                .consistency
+                .as_ref()
+                .map(|c| c.joint_parameters.as_slice()),
         )
         .filter(|(_, z)| z * z < penalty)
         .map(|(label, z)| WeakEffect {
@@ -611,7 +614,7 @@ pub fn run(
 /// The effect of `effects` (a final model) closest to none: its label and how many standard
 /// errors its parameter lies from the value that means no effect (0 for every effect of
 /// the library), in the fit of the final model to both channels together that the channel
-/// check makes (`consistency`; friction's parameter comes from the loads there, a camera
+/// check makes (`joint`, [`ChannelConsistency::joint_parameters`]; friction's parameter comes from the loads there, a camera
 /// scale's from the radius), else in the final model's fit. None without a parameter and
 /// standard error to read, and without the channel check's fits (they did not converge):
 /// the final model's standard errors may be the radius's alone, which cannot see what the
@@ -620,14 +623,13 @@ pub fn run(
 fn weakest_effect(
     effects: &[NamedEffect],
     cands: &[Candidate],
-    consistency: Option<&ChannelConsistency>,
+    joint: Option<&[JointParameter]>,
 ) -> Option<(String, f64)> {
-    let consistency = consistency?;
+    let joint_parameters = joint?;
     effects
         .iter()
         .filter_map(|e| {
-            let joint = consistency
-                .joint_parameters
+            let joint = joint_parameters
                 .iter()
                 .find(|p| p.effect == e.label)
                 .filter(|p| p.se.is_finite() && p.se > 0.0)
@@ -1186,6 +1188,62 @@ mod tests {
         assert!(starts(&decision(Verdict::Effect, Some(0)), &overfit).is_empty());
         // nor is the named effect itself, however large its gain
         assert!(starts(&decision(Verdict::Effect, Some(1)), &s).is_empty());
+    }
+
+    fn named(kind: EffectKind, value: f64, se: f64) -> NamedEffect {
+        let c = Candidate {
+            kind,
+            tau_h_mm: None,
+        };
+        NamedEffect {
+            effect: kind.name().into(),
+            label: c.label(),
+            parameters: parameter_map(&c, value, se),
+        }
+    }
+
+    fn joint(kind: EffectKind, value: f64, se: f64) -> JointParameter {
+        JointParameter {
+            effect: kind.name().into(),
+            value,
+            se,
+        }
+    }
+
+    #[test]
+    fn an_effect_the_joint_fit_puts_at_none_is_the_weakest() {
+        let cands: Vec<Candidate> = EffectKind::ALL
+            .iter()
+            .map(|&kind| Candidate {
+                kind,
+                tau_h_mm: None,
+            })
+            .collect();
+        // the final model's own fit reads friction from the radius (0.2 +- 0.12) and the
+        // scale at 0.03; the joint fit reads friction from the loads and finds the scale
+        // redundant: the scale is the weakest, at 0.4 standard errors
+        let effects = [
+            named(EffectKind::RadiusScale, 0.03, 0.001),
+            named(EffectKind::Friction, 0.2, 0.12),
+        ];
+        let both = [
+            joint(EffectKind::RadiusScale, 0.0002, 0.0005),
+            joint(EffectKind::Friction, 0.21, 0.012),
+        ];
+        let (label, z) = weakest_effect(&effects, &cands, Some(&both)).expect("a reading");
+        assert_eq!(label, "radius_scale");
+        assert!((z - 0.4).abs() < 1e-12, "{z}");
+        // a joint reading without a finite standard error falls back to the final model's:
+        // friction at 0.2 / 0.12 = 1.67 standard errors, now the weakest
+        let both = [
+            joint(EffectKind::RadiusScale, 0.03, 0.001),
+            joint(EffectKind::Friction, 0.21, f64::INFINITY),
+        ];
+        let (label, z) = weakest_effect(&effects, &cands, Some(&both)).expect("a reading");
+        assert_eq!(label, "friction");
+        assert!((z - 0.2 / 0.12).abs() < 1e-12, "{z}");
+        // without the channel check's fits nothing is judged
+        assert!(weakest_effect(&effects, &cands, None).is_none());
     }
 
     #[test]
