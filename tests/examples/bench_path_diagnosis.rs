@@ -20,16 +20,25 @@
 //! listed as not run.
 //!
 //!     cargo run --release -p system-tests --example bench_path_diagnosis -- OUTDIR \
-//!         [--seeds N] [--null-seeds N] [--effects NAME,...] [--clear-only]
+//!         [--seeds N] [--null-seeds N] [--effects NAME,...] [--clear-only] [--jobs N]
 //!
 //! Each case's two records are kept in OUTDIR (`case-EFFECT-SIZE-SEED/record-P`) and reused
 //! by later runs, so an interrupted study carries on where it stopped; the diagnosis is
 //! always recomputed from them (so a change of the diagnosis is measured on the same bench
-//! data in ~15 s per case). Delete OUTDIR after changing the bench path (hil-sim, the
-//! calibrations, vision, pairing). About a minute per case on two cores when the bench runs.
+//! data in ~15 s per case). The truths are solved first, one at a time, and kept in
+//! `OUTDIR/truth-cache`, keyed by their parameters and solver settings, so the seeds of one
+//! effect and size solve their sample once. Delete OUTDIR after changing the bench path
+//! (hil-sim, the calibrations, vision, pairing). A bench run is paced by its emulated link
+//! in real time (about 35 s for a case's two records, a fifth of a core), so `--jobs N` runs
+//! N cases at once (their diagnoses one at a time); the records of one seed differ from run
+//! to run by the sample timing, as a real bench's do. Too many jobs starve the hosts: a
+//! host that sends nothing for 1 s faults its controller, and the case is listed as not
+//! run (a later run retries it).
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Mutex, mpsc};
 use std::time::Instant;
 
 use diagnosis::candidates::EffectKind;
@@ -71,6 +80,8 @@ struct Args {
     null_seeds: u64,
     effects: Vec<EffectKind>,
     clear_only: bool,
+    /// Cases run at once (the bench is paced by its emulated link, not by the CPU).
+    jobs: usize,
 }
 
 fn parse_args() -> Result<Args, String> {
@@ -81,6 +92,7 @@ fn parse_args() -> Result<Args, String> {
         null_seeds: 4,
         effects: EffectKind::ALL.to_vec(),
         clear_only: false,
+        jobs: 1,
     };
     let number = |flag: &str, v: Option<String>| -> Result<u64, String> {
         v.ok_or_else(|| format!("{flag} needs a number"))?
@@ -93,6 +105,11 @@ fn parse_args() -> Result<Args, String> {
             "--seeds" => args.seeds = number("--seeds", it.next())?,
             "--null-seeds" => args.null_seeds = number("--null-seeds", it.next())?,
             "--clear-only" => args.clear_only = true,
+            "--jobs" => {
+                args.jobs = usize::try_from(number("--jobs", it.next())?)
+                    .map_err(|e| format!("--jobs: {e}"))?
+                    .max(1)
+            }
             "--effects" => {
                 let list = it.next().ok_or("--effects needs a list of names")?;
                 args.effects = list
@@ -114,18 +131,12 @@ fn parse_args() -> Result<Args, String> {
             _ => out = Some(PathBuf::from(a)),
         }
     }
-    args.out = out.ok_or("usage: bench_path_diagnosis OUTDIR [--seeds N] [--null-seeds N] [--effects NAME,...] [--clear-only]")?;
+    args.out = out.ok_or("usage: bench_path_diagnosis OUTDIR [--seeds N] [--null-seeds N] [--effects NAME,...] [--clear-only] [--jobs N]")?;
     Ok(args)
 }
 
-/// Runs one case: two bench runs, their records diagnosed.
-fn run_case(
-    hidden: Option<Hidden>,
-    stale: bool,
-    seed: u64,
-    dir: &Path,
-) -> Result<CaseResult, String> {
-    let started = Instant::now();
+/// The true modulus and the hil-sim scenario of a case (its truth solved by fem-core).
+fn case_scenario(hidden: Option<Hidden>, stale: bool, seed: u64) -> (f64, Scenario) {
     let modulus = truth_modulus_kpa(hidden.map(|h| h.kind));
     let spec = SimSpec {
         modulus_kpa: modulus,
@@ -146,6 +157,19 @@ fn run_case(
         pressures_kpa.extend(PRESSURES_KPA);
         pressures_kpa.sort_by(f64::total_cmp);
     }
+    (modulus, scenario)
+}
+
+/// Runs one case: two bench runs, their records diagnosed.
+fn run_case(
+    hidden: Option<Hidden>,
+    stale: bool,
+    seed: u64,
+    dir: &Path,
+    truth_cache: &Path,
+) -> Result<CaseResult, String> {
+    let started = Instant::now();
+    let (modulus, mut scenario) = case_scenario(hidden, stale, seed);
     let mut curves = Vec::new();
     let mut truth_written = false;
     for p in PRESSURES_KPA {
@@ -159,7 +183,7 @@ fn run_case(
         if !truth_written {
             // the truth's curves (the converged sample as it is, friction as the change
             // between two finer solves: `truth_curves`) run as a `curves` mechanics source
-            scenario.mechanics = write_truth_curves(&scenario, &dir.join("truth"))?;
+            scenario.mechanics = write_truth_curves(&scenario, &dir.join("truth"), truth_cache)?;
             truth_written = true;
         }
         let options = DemoOptions {
@@ -186,7 +210,12 @@ fn run_case(
         seed,
         ..DiagnoseOptions::default()
     };
-    let d = diagnose(&base, &effects, points, &options).map_err(|e| e.to_string())?;
+    // one diagnosis at a time (each uses every core), beside the other cases' benches
+    static DIAGNOSING: Mutex<()> = Mutex::new(());
+    let d = {
+        let _one = DIAGNOSING.lock().unwrap_or_else(|e| e.into_inner());
+        diagnose(&base, &effects, points, &options).map_err(|e| e.to_string())?
+    };
     // the effect's own parameter (the map also holds derived values such as the thickness)
     let first_value = |v: &serde_json::Value| {
         v.as_object()?
@@ -260,51 +289,110 @@ fn main() -> ExitCode {
     println!(
         "effect               size     seed  verdict       named (forward)                          parameter (joint)      E2 before -> after [true]   s"
     );
-    let mut results = Vec::new();
-    let mut failed = 0;
-    for (hidden, stale, seed) in cases {
+    let truth_cache = args.out.join("truth-cache");
+    let case_dir = |&(hidden, stale, seed): &(Option<Hidden>, bool, u64)| {
         let name = hidden.map_or("none".to_string(), |h| {
             format!("{}-{}", label(h.kind, stale), h.size)
         });
-        let dir = args.out.join(format!("case-{name}-{seed}"));
-        let _ = std::fs::create_dir_all(&dir);
-        match run_case(hidden, stale, seed, &dir) {
-            Ok(r) => {
-                println!(
-                    "{:<20} {:<8} {:<5} {:<13} {:<40} {:<22} {:>6.1} -> {:>6} [{:.0}] {:>5.0}",
-                    r.effect,
-                    r.size,
-                    r.seed,
-                    r.verdict,
-                    if r.named.is_empty() {
-                        "-".to_string()
-                    } else {
-                        r.named.join(", ")
-                    },
-                    match (r.parameter, r.joint_parameter) {
-                        (Some(p), Some(j)) => format!("{p:.4} ({j:.4})"),
-                        (Some(p), None) => format!("{p:.4}"),
-                        _ => "-".into(),
-                    },
-                    r.modulus_baseline_kpa,
-                    r.modulus_after_kpa
-                        .map_or("-".to_string(), |m| format!("{m:.1}")),
-                    r.true_modulus_kpa,
-                    r.seconds
-                );
-                results.push(r);
+        (args.out.join(format!("case-{name}-{seed}")), name)
+    };
+    // The truths first, one at a time with every core (into the cache): a solve running
+    // beside the benches would starve their hosts, whose link to the emulated controller
+    // keeps real time (a host that sends nothing for 1 s faults the controller).
+    let truth_errors: Vec<Option<String>> = cases
+        .iter()
+        .map(|case| {
+            let (dir, _) = case_dir(case);
+            let recorded = PRESSURES_KPA
+                .iter()
+                .all(|p| record_curve_at_set_pressure(&dir.join(format!("record-{p}"))).is_ok());
+            if recorded {
+                return None;
             }
-            Err(e) => {
-                failed += 1;
-                println!("{name} seed {seed}: not run: {e}");
+            let (_, scenario) = case_scenario(case.0, case.1, case.2);
+            diagnosis::simulate::truth_curves_cached(&scenario, &truth_cache)
+                .err()
+                .map(|e| e.to_string())
+        })
+        .collect();
+    let next = AtomicUsize::new(0);
+    let (sender, finished) = mpsc::channel();
+    let mut results = Vec::new();
+    let mut failed = 0;
+    std::thread::scope(|scope| {
+        for _ in 0..args.jobs {
+            let sender = sender.clone();
+            let (cases, next, truth_cache) = (&cases, &next, &truth_cache);
+            let (truth_errors, case_dir) = (&truth_errors, &case_dir);
+            scope.spawn(move || {
+                loop {
+                    let k = next.fetch_add(1, Ordering::SeqCst);
+                    let Some(&(hidden, stale, seed)) = cases.get(k) else {
+                        break;
+                    };
+                    let (dir, name) = case_dir(&cases[k]);
+                    let _ = std::fs::create_dir_all(&dir);
+                    let result = match &truth_errors[k] {
+                        Some(e) => Err(format!("truth: {e}")),
+                        None => run_case(hidden, stale, seed, &dir, truth_cache),
+                    };
+                    if sender.send((k, name, seed, result)).is_err() {
+                        break;
+                    }
+                }
+            });
+        }
+        drop(sender);
+        // lines in the order of the cases, whichever worker finishes first
+        let mut pending = std::collections::BTreeMap::new();
+        let mut printed = 0;
+        for (k, name, seed, result) in finished {
+            pending.insert(k, (name, seed, result));
+            while let Some((name, seed, result)) = pending.remove(&printed) {
+                printed += 1;
+                match result {
+                    Ok(r) => {
+                        print_case(&r);
+                        results.push(r);
+                    }
+                    Err(e) => {
+                        failed += 1;
+                        println!("{name} seed {seed}: not run: {e}");
+                    }
+                }
             }
         }
-    }
+    });
     summary(&results);
     if failed > 0 {
         println!("  {failed} case(s) not run (above)");
     }
     ExitCode::SUCCESS
+}
+
+fn print_case(r: &CaseResult) {
+    println!(
+        "{:<20} {:<8} {:<5} {:<13} {:<40} {:<22} {:>6.1} -> {:>6} [{:.0}] {:>5.0}",
+        r.effect,
+        r.size,
+        r.seed,
+        r.verdict,
+        if r.named.is_empty() {
+            "-".to_string()
+        } else {
+            r.named.join(", ")
+        },
+        match (r.parameter, r.joint_parameter) {
+            (Some(p), Some(j)) => format!("{p:.4} ({j:.4})"),
+            (Some(p), None) => format!("{p:.4}"),
+            _ => "-".into(),
+        },
+        r.modulus_baseline_kpa,
+        r.modulus_after_kpa
+            .map_or("-".to_string(), |m| format!("{m:.1}")),
+        r.true_modulus_kpa,
+        r.seconds
+    );
 }
 
 /// Per effect and size: named first / named at all; clean data: anything named.
@@ -438,10 +526,16 @@ fn rates(results: &[CaseResult]) {
     }
 }
 
-/// Solves the truth of `scenario` (`diagnosis::simulate::truth_curves`), writes each curve
+/// Solves the truth of `scenario` (`diagnosis::simulate::truth_curves`, kept in the study's
+/// `truth_cache`: the seeds of one effect and size share their sample), writes each curve
 /// as JSON into `dir` and returns the `curves` mechanics source that reads them.
-fn write_truth_curves(scenario: &Scenario, dir: &Path) -> Result<MechanicsSource, String> {
-    let curves = diagnosis::simulate::truth_curves(scenario).map_err(|e| e.to_string())?;
+fn write_truth_curves(
+    scenario: &Scenario,
+    dir: &Path,
+    truth_cache: &Path,
+) -> Result<MechanicsSource, String> {
+    let curves = diagnosis::simulate::truth_curves_cached(scenario, truth_cache)
+        .map_err(|e| e.to_string())?;
     std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let mut files = Vec::new();
     for (k, c) in curves.iter().enumerate() {

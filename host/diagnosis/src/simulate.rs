@@ -387,7 +387,7 @@ fn cache_file(scenario: &Scenario, dir: &Path) -> Result<(TruthKey, PathBuf), Tr
 
 /// [`truth_curves`] read from or written to `dir` (one JSON file per truth, named by a hash
 /// of its key; the key is stored in the file and compared, so a hash collision re-solves).
-fn truth_curves_cached(scenario: &Scenario, dir: &Path) -> Result<Vec<Curve>, TruthError> {
+pub fn truth_curves_cached(scenario: &Scenario, dir: &Path) -> Result<Vec<Curve>, TruthError> {
     let (key, path) = cache_file(scenario, dir)?;
     if let Ok(text) = std::fs::read_to_string(&path) {
         let cached: CachedTruth = serde_json::from_str(&text).map_err(|e| TruthError::Cache {

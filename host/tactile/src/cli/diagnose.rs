@@ -47,9 +47,9 @@ pub struct DiagnoseArgs {
     /// Seed of the bootstrap and confidence simulations (and of --simulate).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Build the effect tables into this directory (fem-core: thickness and stiffening with the
-    /// band of fine elements at the contact edge, friction on the production mesh; hours on
-    /// two cores) and exit.
+    /// Build the effect tables into this directory (fem-core: all three solved with the band
+    /// of fine elements at the contact edge, as the converged table is; hours on two cores)
+    /// and exit.
     #[arg(long, value_name = "DIR")]
     pub build_tables: Option<PathBuf>,
     /// With --build-tables: only these (thickness, friction, stiffening).
