@@ -181,8 +181,8 @@ fn run_case(
         }
         let _ = std::fs::remove_dir_all(&record);
         if !truth_written {
-            // the truth's curves (the converged sample as it is, friction as the change
-            // between two finer solves: `truth_curves`) run as a `curves` mechanics source
+            // the truth's curves (the converged sample as it is, its friction included:
+            // `truth_curves`) run as a `curves` mechanics source
             scenario.mechanics = write_truth_curves(&scenario, &dir.join("truth"), truth_cache)?;
             truth_written = true;
         }
