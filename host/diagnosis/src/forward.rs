@@ -1105,12 +1105,17 @@ mod tests {
         }
     }
 
-    /// A refitted candidate with radius gain `gain` against a threshold of 7.
-    fn screened(kind: EffectKind, gain: f64, held: HeldOut) -> Screened {
-        let candidate = Candidate {
+    /// The library's candidate of `kind` (no relaxation variant).
+    fn candidate(kind: EffectKind) -> Candidate {
+        Candidate {
             kind,
             tau_h_mm: None,
-        };
+        }
+    }
+
+    /// A refitted candidate with radius gain `gain` against a threshold of 7.
+    fn screened(kind: EffectKind, gain: f64, held: HeldOut) -> Screened {
+        let candidate = candidate(kind);
         Screened {
             effect: kind.name().into(),
             label: candidate.label(),
@@ -1191,10 +1196,7 @@ mod tests {
     }
 
     fn named(kind: EffectKind, value: f64, se: f64) -> NamedEffect {
-        let c = Candidate {
-            kind,
-            tau_h_mm: None,
-        };
+        let c = candidate(kind);
         NamedEffect {
             effect: kind.name().into(),
             label: c.label(),
@@ -1214,10 +1216,7 @@ mod tests {
     fn an_effect_the_joint_fit_puts_at_none_is_the_weakest() {
         let cands: Vec<Candidate> = EffectKind::ALL
             .iter()
-            .map(|&kind| Candidate {
-                kind,
-                tau_h_mm: None,
-            })
+            .map(|&kind| candidate(kind))
             .collect();
         // the final model's own fit reads friction from the radius (0.2 +- 0.12) and the
         // scale at 0.03; the joint fit reads friction from the loads and finds the scale
