@@ -1,10 +1,12 @@
 #!/usr/bin/env bash
 # Fits curves solved with the converged contact radius (tactile fem curve --edge-band) with
-# the shipped production table, next to curves solved on the production mesh itself: the
-# modulus error the production table's discretisation makes on a sample that has no mesh,
+# the shipped production-mesh table (default-production-mesh.lut: the default grid without
+# the edge band), next to curves solved on the production mesh itself: the modulus error
+# the production mesh's discretisation makes on a sample that has no mesh,
 # with the fit's correction to the converged contact radius and without it (the table's
-# own estimate). A production-mesh curve is over-corrected by design: the correction
-# assumes a sample without a mesh.
+# own estimate), and each converged curve fitted directly with the shipped converged table
+# (default.lut, the table the host fits with). A production-mesh curve is over-corrected by
+# design: the correction assumes a sample without a mesh.
 #
 #   scripts/converged_truth_fit.sh [OUT_DIR]      # default target/converged-truth
 #
@@ -15,7 +17,8 @@ out=${1:-target/converged-truth}
 mkdir -p "$out"
 cargo build -q --release -p tactile
 tactile=target/release/tactile
-lut=fem-core/data/default.lut
+lut=fem-core/data/default-production-mesh.lut
+converged_lut=fem-core/data/default.lut
 for case in 37:6 153:6 412:15 600:15; do
     e=${case%:*}
     p=${case#*:}
@@ -25,17 +28,23 @@ for case in 37:6 153:6 412:15 600:15; do
         flag=()
         [ "$mesh" = converged ] && flag=(--edge-band)
         "$tactile" fem curve --modulus "$e" --pressure "$p" "${flag[@]}" --out "$csv" 2>/dev/null
-        fitted=$("$tactile" fit "$csv" --lut "$lut" --json)
-        python3 - "$mesh" "$e" "$fitted" <<'PY'
+        tables=("$lut")
+        [ "$mesh" = converged ] && tables+=("$converged_lut")
+        for table in "${tables[@]}"; do
+            fitted=$("$tactile" fit "$csv" --lut "$table" --json)
+            label="$mesh curve"
+            [ "$table" = "$converged_lut" ] && label="$mesh curve, shipped default.lut"
+            python3 - "$label" "$e" "$fitted" <<'PY'
 import json, sys
-mesh, truth, fit = sys.argv[1], float(sys.argv[2]), json.loads(sys.argv[3])
+label, truth, fit = sys.argv[1], float(sys.argv[2]), json.loads(sys.argv[3])
 e = fit["modulus_kpa"]
 lo, hi = fit["ci95_kpa"]
 covered = "covers" if lo <= truth <= hi else "misses"
 own = fit["fit"].get("modulus_production_kpa") or e
-print(f"    {mesh:10} curve: E2 = {e:7.1f} kPa ({100 * (e / truth - 1):+.2f} %), "
+print(f"    {label}: E2 = {e:7.1f} kPa ({100 * (e / truth - 1):+.2f} %), "
       f"95 % interval {lo:.1f} .. {hi:.1f} kPa ({covered} the truth); "
       f"table's own {own:.1f} kPa ({100 * (own / truth - 1):+.2f} %)")
 PY
+        done
     done
 done

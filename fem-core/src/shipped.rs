@@ -1,4 +1,4 @@
-//! Where the shipped tables (`default.lut`, `default-fine.lut`, the effect tables) are found: the folder named
+//! Where the shipped tables (`default.lut`, `sim-samples.lut`, `default-production-mesh.lut`, the effect tables) are found: the folder named
 //! by the environment variable [`DATA_DIR_VAR`] if set, otherwise this crate's `data/`
 //! folder in the source tree the binary was built from.
 
@@ -16,14 +16,23 @@ pub fn data_dir() -> PathBuf {
     }
 }
 
-/// The production lookup table, `default.lut`.
+/// The shipped lookup table, `default.lut`: the default grid solved with the band of fine
+/// elements at the contact edge (the converged contact radius). The fit and the diagnosis's
+/// baseline use it.
 pub fn default_lut_path() -> PathBuf {
     data_dir().join("default.lut")
 }
 
-/// The converged table, `default-fine.lut`: the production grid solved with the band of
-/// fine elements at the contact edge (the converged contact radius). The simulated bench's
-/// samples are made of it, and the fit corrects the production table's estimate to it.
-pub fn fine_lut_path() -> PathBuf {
-    data_dir().join("default-fine.lut")
+/// What the simulated bench's samples are made of, `sim-samples.lut`: the same converged
+/// settings on the moduli midway between `default.lut`'s (and its two ends), so that a
+/// simulated sample is not read from the nodes the fit reads.
+pub fn sim_samples_lut_path() -> PathBuf {
+    data_dir().join("sim-samples.lut")
+}
+
+/// The same grid on the production mesh without the band, `default-production-mesh.lut`:
+/// its contact radius carries the mesh's own error (up to about 25 um). Kept as the
+/// reference for studies of that error and as the fast model's table.
+pub fn production_mesh_lut_path() -> PathBuf {
+    data_dir().join("default-production-mesh.lut")
 }

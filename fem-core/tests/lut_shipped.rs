@@ -1,8 +1,9 @@
-//! The shipped default table, fem-core/data/default.lut: it verifies (format version and
-//! content hash), covers the default grid's axes, and — the slow `#[ignore]` test —
-//! regenerating a sample of its curves with the recorded parameters, mesh level and solver
-//! settings reproduces the stored numbers; the converged table, default-fine.lut, records
-//! the band's current settings and (ignored) reproduces two of its curves. Run the slow
+//! The shipped tables: the production-mesh table, fem-core/data/default-production-mesh.lut,
+//! verifies (format version and content hash), covers the default grid's axes, and — the
+//! slow `#[ignore]` test — regenerating a sample of its curves with the recorded parameters,
+//! mesh level and solver settings reproduces the stored numbers; the converged table the
+//! host fits with, default.lut (the same grid with the edge band), records the band's
+//! current settings and (ignored) reproduces two of its curves. Run the slow
 //! tests with `cargo test -p fem-core --release --test lut_shipped -- --ignored`.
 
 // Test helpers outside #[test] functions may unwrap too (clippy.toml allows it only inside them).
@@ -15,33 +16,37 @@ use fem_core::lut::{
 use std::path::PathBuf;
 
 fn shipped() -> LutFile {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data/default.lut");
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data/default-production-mesh.lut");
     read_lut(&path).unwrap()
 }
 
+/// Both shipped default-grid tables verify (a `read_lut` checks the format version and the
+/// content hash), cover the required axes and say how they were solved.
 #[test]
 fn shipped_table_verifies_and_covers_the_required_axes() {
-    let f = shipped();
-    let g = &f.lut.grid;
-    assert!(f.lut.shard.is_none());
-    assert!(
-        f.size_bytes < 3_000_000,
-        "a few MB at most: {}",
-        f.size_bytes
-    );
-    assert!(g.modulus_kpa[0] <= 10.0 && *g.modulus_kpa.last().unwrap() >= 1000.0);
-    for p in [0.0, 6.0, 10.0, 15.0, 20.0, 30.0] {
-        assert!(g.pressure_kpa.contains(&p), "p_air {p} missing");
+    for (f, banded) in [(shipped(), false), (converged(), true)] {
+        let g = &f.lut.grid;
+        assert!(f.lut.shard.is_none());
+        assert!(
+            f.size_bytes < 3_000_000,
+            "a few MB at most: {}",
+            f.size_bytes
+        );
+        assert!(g.modulus_kpa[0] <= 10.0 && *g.modulus_kpa.last().unwrap() >= 1000.0);
+        for p in [0.0, 6.0, 10.0, 15.0, 20.0, 30.0] {
+            assert!(g.pressure_kpa.contains(&p), "p_air {p} missing");
+        }
+        // log-spaced E2
+        let ratios: Vec<f64> = g.modulus_kpa.windows(2).map(|w| w[1] / w[0]).collect();
+        assert!(ratios.iter().all(|r| (r / ratios[0] - 1.0).abs() < 1e-3));
+        assert_eq!(f.header.mesh.mesh_level, g.base.mesh_level);
+        assert!(
+            f.lut.solver.starts_with("fem_core::solve_curve"),
+            "{}",
+            f.lut.solver
+        );
+        assert_eq!(f.lut.edge_band.is_some(), banded);
     }
-    // log-spaced E2
-    let ratios: Vec<f64> = g.modulus_kpa.windows(2).map(|w| w[1] / w[0]).collect();
-    assert!(ratios.iter().all(|r| (r / ratios[0] - 1.0).abs() < 1e-3));
-    assert_eq!(f.header.mesh.mesh_level, g.base.mesh_level);
-    assert!(
-        f.lut.solver.starts_with("fem_core::solve_curve"),
-        "{}",
-        f.lut.solver
-    );
 }
 
 #[test]
@@ -79,7 +84,7 @@ fn regenerating_sample_curves_reproduces_the_stored_ones() {
     let f = shipped();
     let lut = &f.lut;
     // The settings the table was built with must be the solver's current ones, or the
-    // table is stale and must be rebuilt (`tactile lut build --out fem-core/data/default.lut`).
+    // table is stale and must be rebuilt (`tactile lut build --out fem-core/data/default-production-mesh.lut`).
     assert_eq!(
         lut.solver,
         fem_solver_description(lut.grid.base.mesh_level),
@@ -146,13 +151,13 @@ fn assert_reproduces(curve: &fem_core::Curve, stored: &LutCurve, what: &str) {
 }
 
 fn converged() -> LutFile {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data/default-fine.lut");
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data/default.lut");
     read_lut(&path).unwrap()
 }
 
-/// The converged table (`default-fine.lut`) records the band's settings it was solved with;
+/// The converged table (`default.lut`) records the band's settings it was solved with;
 /// they must be the band's current ones, or the table is stale (rebuild it with
-/// `tactile lut build --grid default --edge-band --out fem-core/data/default-fine.lut`). No
+/// `tactile lut build --grid default --edge-band --out fem-core/data/default.lut`). No
 /// solve: a change of the band's mesh, Newton or linear-solver settings fails here at once.
 #[test]
 fn the_converged_table_records_the_bands_current_settings() {
@@ -160,9 +165,34 @@ fn the_converged_table_records_the_bands_current_settings() {
     assert_eq!(
         f.lut.solver,
         edge_band_solver_description(&f.lut.grid),
-        "the edge band's settings changed since default-fine.lut was built"
+        "the edge band's settings changed since default.lut was built"
     );
     assert!(f.lut.edge_band.is_some());
+}
+
+/// The simulated bench's sample table (`sim-samples.lut`) is the converged table's settings
+/// on the `sim-samples` grid (the default grid's ends and the midpoints between its moduli):
+/// the band's current solver description, the fit table's base parameters, band and error
+/// estimate, and the axes of the named grid, none of its interior moduli one of the fit's.
+#[test]
+fn the_sim_samples_table_is_the_converged_settings_between_the_fit_tables_moduli() {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data/sim-samples.lut");
+    let f = read_lut(&path).unwrap();
+    let fit_table = converged();
+    let grid = fem_core::lut::LutGrid::sim_samples_grid();
+    assert_eq!(f.lut.grid.modulus_kpa, grid.modulus_kpa);
+    assert_eq!(f.lut.grid.pressure_kpa, grid.pressure_kpa);
+    assert_eq!(f.lut.grid.base, fit_table.lut.grid.base);
+    assert_eq!(f.lut.edge_band, fit_table.lut.edge_band);
+    assert_eq!(f.lut.solver, edge_band_solver_description(&f.lut.grid));
+    assert_eq!(
+        f.lut.contact_radius_error,
+        fit_table.lut.contact_radius_error
+    );
+    // no sample node is one of the fit's interior nodes
+    for e in &f.lut.grid.modulus_kpa[1..f.lut.grid.modulus_kpa.len() - 1] {
+        assert!(!fit_table.lut.grid.modulus_kpa.contains(e), "{e}");
+    }
 }
 
 #[test]
@@ -242,7 +272,7 @@ fn a_table_with_a_nan_radius_and_a_valid_hash_is_refused() {
 #[test]
 fn interpolation_across_the_modulus_stays_within_a_few_micrometres() {
     use fem_core::lut::interpolation_error::modulus_leave_one_out;
-    for name in ["default.lut", "default-fine.lut"] {
+    for name in ["default-production-mesh.lut", "default.lut"] {
         let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
             .join("data")
             .join(name);
@@ -266,8 +296,9 @@ fn headers_state_the_interpolation_error_their_curves_give() {
     use fem_core::lut::interpolation_error::modulus_leave_one_out;
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data");
     for name in [
+        "default-production-mesh.lut",
         "default.lut",
-        "default-fine.lut",
+        "sim-samples.lut",
         "effects-thickness.lut",
         "effects-friction.lut",
         "effects-stiffening.lut",

@@ -95,11 +95,13 @@ fn default_max_depth() -> f64 {
     2.0
 }
 
-/// The sample's mechanics default to the shipped simulation table (finer than the fit's).
+/// The sample's mechanics default to the shipped simulation table (`sim-samples.lut`: the
+/// converged settings of the host's `default.lut` on the moduli midway between its nodes),
+/// so that a simulated sample is not read from the nodes the fit reads.
 impl Default for MechanicsSource {
     fn default() -> Self {
         Self::Lut {
-            path: fem_core::shipped::fine_lut_path(),
+            path: fem_core::shipped::sim_samples_lut_path(),
         }
     }
 }

@@ -8,8 +8,8 @@
 //! `cargo test --release -p system-tests --test diagnose_table_error -- --ignored --nocapture`
 //! (`DIAG_TABLES=DIR` reads the tables from DIR instead of the shipped ones, e.g. tables
 //! rebuilt with `tactile diagnose --build-tables DIR`). These measure the production table
-//! (`default.lut`: the production mesh, no edge band) against solves at its settings; `loo_calibration` with `DIAG_CONVERGED=1`
-//! measures the diagnosis's converged baseline (`default-fine.lut`) against converged
+//! (`default-production-mesh.lut`: the production mesh, no edge band) against solves at its settings; `loo_calibration` with `DIAG_CONVERGED=1`
+//! measures the diagnosis's converged baseline (`default.lut`) against converged
 //! solves (the edge band), as the simulated truth is made.
 
 use diagnosis::model::Surface;

@@ -172,6 +172,29 @@ impl LutGrid {
         )
     }
 
+    /// The simulated bench's sample grid: the default grid's two end moduli and the
+    /// geometric midpoints between its neighbouring moduli (15 in all, rounded to 4
+    /// significant digits), at its pressures and base. Built with the edge band it is the
+    /// shipped `sim-samples.lut`: samples read from it are interpolated between other nodes
+    /// than the fit's table, so a simulated run sees the fit's interpolation error.
+    pub fn sim_samples_grid() -> Self {
+        let default = Self::default_grid();
+        let nodes = &default.modulus_kpa;
+        let mut moduli = vec![nodes[0]];
+        moduli.extend(
+            nodes
+                .windows(2)
+                .map(|w| round_significant((w[0] * w[1]).sqrt(), 4)),
+        );
+        moduli.extend(nodes.last().copied());
+        Self::with_axes(
+            "sim-samples",
+            default.base.clone(),
+            moduli,
+            default.pressure_kpa.clone(),
+        )
+    }
+
     /// A small, coarse grid for smoke tests of the build pipeline (not for fitting).
     pub fn tiny_grid() -> Self {
         let base = CurveParams {
@@ -182,10 +205,11 @@ impl LutGrid {
         Self::with_axes("tiny", base, vec![30.0, 100.0, 300.0], vec![0.0, 15.0])
     }
 
-    /// A named grid (`default` or `tiny`).
+    /// A named grid (`default`, `sim-samples` or `tiny`).
     pub fn named(name: &str) -> Option<Self> {
         match name {
             "default" => Some(Self::default_grid()),
+            "sim-samples" => Some(Self::sim_samples_grid()),
             "tiny" => Some(Self::tiny_grid()),
             _ => None,
         }
@@ -408,6 +432,27 @@ fn pick_value(axis: &'static str, grid: &[f64], want: Option<f64>) -> Result<usi
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_sim_samples_grid_lies_between_the_default_grids_moduli() {
+        let (d, t) = (LutGrid::default_grid(), LutGrid::sim_samples_grid());
+        t.validate().unwrap();
+        assert_eq!(t.pressure_kpa, d.pressure_kpa);
+        assert_eq!(t.base, d.base);
+        let (dm, tm) = (&d.modulus_kpa, &t.modulus_kpa);
+        assert_eq!(tm.len(), dm.len() + 1);
+        // the same range, so that every sample the fit's table covers can be simulated
+        assert_eq!((tm[0], tm[tm.len() - 1]), (dm[0], dm[dm.len() - 1]));
+        for (k, w) in dm.windows(2).enumerate() {
+            let mid = tm[k + 1];
+            // strictly inside, at the geometric midpoint to the 4 digits kept
+            assert!(w[0] < mid && mid < w[1], "{mid} not within {w:?}");
+            assert!(
+                (mid / (w[0] * w[1]).sqrt() - 1.0).abs() < 5e-4,
+                "{mid} vs {w:?}"
+            );
+        }
+    }
 
     #[test]
     fn flat_index_round_trips_and_modulus_is_innermost() {

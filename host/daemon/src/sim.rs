@@ -1,5 +1,6 @@
 //! A daemon on the simulated bench with test-friendly defaults (an ephemeral loopback
-//! port, the shipped table for the fit, a finer table for the sample, patient link timeouts): used by the system tests, the
+//! port, the shipped table for the fit, the simulation table for the sample, patient link
+//! timeouts): used by the system tests, the
 //! benchmarks and `tactile daemon --sim`.
 
 use std::net::SocketAddr;
@@ -13,16 +14,17 @@ use super::device_thread::{DeviceConfig, DeviceSource};
 use super::server::{DaemonError, DaemonHandle, DaemonOptions, start};
 use link::LinkConfig;
 
-/// The repository's shipped production lookup table (for real hardware).
+/// The repository's shipped lookup table (`fem-core/data/default.lut`, the converged contact
+/// radius), the fit's table on real hardware and on the simulated bench.
 pub fn shipped_lut() -> PathBuf {
     fem_core::shipped::default_lut_path()
 }
 
-/// The table the simulated bench's sample is made of: the production grid with the converged
-/// contact radius (`fem-core/data/default-fine.lut`, the edge band), so that a simulated run
-/// does not fit its own mesh; the fit uses the production table ([`shipped_lut`]).
+/// The table the simulated bench's sample is made of: `fem-core/data/sim-samples.lut`, the
+/// fit table's converged settings on the moduli midway between its nodes, so that a `--sim`
+/// run's sample is not read from the nodes the fit reads.
 pub fn sim_lut() -> PathBuf {
-    fem_core::shipped::fine_lut_path()
+    fem_core::shipped::sim_samples_lut_path()
 }
 
 /// Starts hil-sim with `scenario` (default: [`super::jobs::default_sim_scenario`]) and a

@@ -31,7 +31,7 @@ use fem_core::{Curve, CurveParams};
 /// that follows the contact edge (`fem_core::Simulation::with_edge_band`), whose contact
 /// radius is converged to about 2 um (along the surfaces and through the shell's wall) —
 /// the settings of the converged baseline
-/// (`default-fine.lut`) but solved at the truth's exact modulus and pressure, so the
+/// (`default.lut`) but solved at the truth's exact modulus and pressure, so the
 /// diagnosis sees the table's interpolation, not a shared mesh.
 pub const TRUTH_MESH_LEVEL: i32 = 0;
 /// Load steps of the truth solves: the converged table's step of 0.05 mm of tube travel, to

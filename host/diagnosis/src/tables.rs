@@ -277,7 +277,7 @@ pub fn read_effect_table(path: &Path) -> Result<EffectTable, TableError> {
 }
 
 /// The shipped effect tables (`fem-core/data/effects-*.lut`) and the baseline: the
-/// converged table (`default-fine.lut`, [`converged_baseline`]).
+/// converged table (`default.lut`, [`converged_baseline`]).
 pub fn shipped_tables() -> Result<(Lut, Vec<EffectTable>), TableError> {
     let effects = EffectAxis::ALL
         .iter()
@@ -286,7 +286,7 @@ pub fn shipped_tables() -> Result<(Lut, Vec<EffectTable>), TableError> {
     Ok((converged_baseline()?, effects))
 }
 
-/// The diagnosis's baseline: the converged table (`fem-core/data/default-fine.lut`: the
+/// The diagnosis's baseline: the converged table (`fem-core/data/default.lut`: the
 /// production grid solved with the band of fine elements at the contact edge, mesh level 0,
 /// 40 steps), so that what the diagnosis calls a disagreement is not the mesh of its own
 /// model. The effects are read from the effect tables as changes from their base slice
@@ -294,14 +294,14 @@ pub fn shipped_tables() -> Result<(Lut, Vec<EffectTable>), TableError> {
 /// first inflated node through the thickness table's 1 kPa steps
 /// ([`super::model::Surface::with_pressure_reference`]).
 pub fn converged_baseline() -> Result<Lut, TableError> {
-    read_baseline(&fem_core::shipped::fine_lut_path())
+    read_baseline(&fem_core::shipped::default_lut_path())
 }
 
-/// The production table (`fem-core/data/default.lut`: the production mesh without the edge
-/// band, whose contact radius carries the mesh's own error, up to about 25 um), for studies
-/// of a diagnosis on such a baseline (`tactile diagnose --lut`).
+/// The production-mesh table (`fem-core/data/default-production-mesh.lut`: the production
+/// mesh without the edge band, whose contact radius carries the mesh's own error, up to
+/// about 25 um), for studies of a diagnosis on such a baseline (`tactile diagnose --lut`).
 pub fn production_baseline() -> Result<Lut, TableError> {
-    read_baseline(&fem_core::shipped::default_lut_path())
+    read_baseline(&fem_core::shipped::production_mesh_lut_path())
 }
 
 fn read_baseline(path: &Path) -> Result<Lut, TableError> {

@@ -1,11 +1,12 @@
 //! A model file with a manometer offset, used for later samples: the offset moves the true
-//! pressure below the production table's first inflated node (6 kPa set point, the
+//! pressure below the production-mesh table's first inflated node (6 kPa set point, the
 //! manometer reading 1.5 kPa high: 4.5 kPa true), where the table's straight line between
 //! 0 and 6 kPa is far off. The model file records the thickness table, whose base slice
 //! (1 kPa steps) carries the table there; without it the fit refuses the pressure.
 //!
-//! Truth: a direct fem-core solve at the true pressure, on the production table's mesh and
-//! steps (so only the reading across the pressure differs).
+//! Truth: a direct fem-core solve at the true pressure, on the production-mesh table's mesh
+//! and steps (`default-production-mesh.lut`, the shipped grid without the edge band, so that
+//! only the reading across the pressure differs and the solve stays fast in a debug build).
 
 use diagnosis::applied::{AppliedEffect, DiagnosisSource, LoadedModel, ModelFile};
 use diagnosis::tables::shipped_tables;
@@ -16,8 +17,8 @@ use fit::{FitOptions, FitPoint, LutModel, fit_modulus};
 #[test]
 fn a_manometer_offset_below_the_first_inflated_node_is_read_through_the_dense_table() {
     let (_, effects) = shipped_tables().expect("shipped tables");
-    let production = fem_core::lut::read_lut(&fem_core::shipped::data_dir().join("default.lut"))
-        .expect("production table")
+    let production = fem_core::lut::read_lut(&fem_core::shipped::production_mesh_lut_path())
+        .expect("production-mesh table")
         .lut;
     let (true_kpa, set_kpa, offset_kpa) = (170.0, 6.0, 1.5);
     let params = CurveParams {
@@ -61,7 +62,7 @@ fn a_manometer_offset_below_the_first_inflated_node_is_read_through_the_dense_ta
         &effects,
         DiagnosisSource {
             inputs: vec![],
-            baseline: "default.lut".into(),
+            baseline: "default-production-mesh.lut".into(),
             modulus_before_kpa: None,
             modulus_after_kpa: None,
         },

@@ -437,7 +437,7 @@ impl DemoError {
     }
 }
 
-/// The demo's default fit table: the shipped production table, as for `tactile measure`.
+/// The demo's default fit table: the shipped converged table, as for `tactile measure`.
 pub fn demo_fit_lut_path() -> std::path::PathBuf {
     fem_core::shipped::default_lut_path()
 }
@@ -505,7 +505,7 @@ pub fn run_demo_with(scenario: Scenario, options: &DemoOptions) -> Result<DemoRe
     let lut_path = options.lut.clone().unwrap_or_else(demo_fit_lut_path);
     if options.lut.is_none() && options.scenario.is_none() {
         notes.push(format!(
-            "fit table: {} (the production table, mesh level 0); the simulated sample is solved at its exact modulus on mesh level {DEMO_MESH_LEVEL} with the converged contact radius (the edge band); the fit corrects its estimate to that contact radius with the shipped converged table (default-fine.lut)",
+            "fit table: {} (the shipped table: mesh level 0 with the converged contact radius, the edge band); the simulated sample is solved directly at its exact modulus on mesh level {DEMO_MESH_LEVEL} with the edge band, not read from the table",
             lut_path.display()
         ));
     }

@@ -1,7 +1,9 @@
 //! The fit's pressure-interpolation term against direct solves: curves solved on the
-//! production table's own mesh at its modulus nodes (where interpolation across E2 adds
-//! nothing) and at pressures between its inflated pressure nodes, fitted without noise
-//! with the shipped table. Each estimate's error then comes from the table's straight line
+//! production-mesh table's own mesh (`default-production-mesh.lut`, the default grid
+//! without the edge band, so that each solve is fast; the converged `default.lut` has the
+//! same pressure axis) at its modulus nodes (where interpolation across E2 adds nothing)
+//! and at pressures between its inflated pressure nodes, fitted without noise with that
+//! table. Each estimate's error then comes from the table's straight line
 //! in p_air (and the mesh's wiggles along u_s); the term estimates it from a parabola
 //! through three of the table's inflated nodes (`LutModel::pressure_curvature_mm`).
 //!
@@ -19,11 +21,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Some(list) => list.split(',').map(str::parse).collect::<Result<_, _>>()?,
         None => vec![8.0, 12.5, 17.5, 25.0],
     };
-    let path = fem_core::shipped::default_lut_path();
+    let path = fem_core::shipped::production_mesh_lut_path();
     let lut = read_lut(&path)?.lut;
     let model = LutModel::new(&lut)?;
     println!(
-        "the shipped production table ({} modulus nodes 20..1000 kPa, pressure nodes {:?} kPa): direct solves at those moduli, fitted without noise",
+        "the shipped production-mesh table ({} modulus nodes 20..1000 kPa, pressure nodes {:?} kPa): direct solves at those moduli, fitted without noise",
         lut.grid
             .modulus_kpa
             .iter()

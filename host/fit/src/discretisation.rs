@@ -1,27 +1,28 @@
 //! The model's own discretisation error, carried into the modulus.
 //!
-//! The production table (mesh level L) and the same grid solved one level finer (level L+1),
-//! or with the converged contact radius (the band of fine elements at the contact edge,
-//! `tactile lut build --edge-band`, the shipped `fem-core/data/default-fine.lut`), differ
-//! in the contact radius by the leading part of level L's discretisation error (all of it,
-//! to about 2 um along the surfaces and under a micrometre through the shell's wall, with
-//! the band). Projected on the fit's
-//! sensitivity to ln E2 at the estimate E, that difference is the bias it causes in the
-//! modulus, ln E(production model) - ln E(finer model), to first order:
+//! - **The table is converged** (solved with the band of fine elements at the contact edge,
+//!   `tactile lut build --edge-band`, as the shipped `fem-core/data/default.lut` is; its
+//!   header records the band and its estimated error of a): the estimate is kept, and the
+//!   table's own error, at most `max_um` of its header's `contact_radius_error` at any point,
+//!   projects to at most `r = max_um sum_i |s_i| / sum_i s_i^2` in ln E2
+//!   (`s_i = da/d ln E2` at the point), added to the interval in quadrature.
+//! - **The table is a production-mesh table** (mesh level L without the band, such as
+//!   `fem-core/data/default-production-mesh.lut`) and the same grid solved finer is at hand
+//!   (level L+1, or the band): the two differ in the contact radius by the leading part of
+//!   level L's discretisation error (all of it, to about 2 um along the surfaces and under a
+//!   micrometre through the shell's wall, with the band). Projected on the fit's
+//!   sensitivity to ln E2 at the estimate E, that difference is the bias it causes in the
+//!   modulus, ln E(production model) - ln E(finer model), to first order:
 //!
-//! `d = sum_i s_i (a_fine(E, p_i, u_i) - a(E, p_i, u_i)) / sum_i s_i^2`,
-//! `s_i = da/d ln E2 at (E, p_i, u_i)` (central difference, step 0.01 in ln E2).
+//!   `d = sum_i s_i (a_fine(E, p_i, u_i) - a(E, p_i, u_i)) / sum_i s_i^2`,
+//!   `s_i = da/d ln E2 at (E, p_i, u_i)` (central difference, step 0.01 in ln E2).
 //!
-//! (A sample whose true radii are the finer model's is fitted at E with the production
-//! model, so a(E) ~ a_fine(E_true) and a_fine(E) - a(E) ~ s (ln E - ln E_true).)
-//!
-//! - Finer reference converged (the band): the estimate is corrected, E -> E exp(-d), and
-//!   the interval moves with it; what remains is the reference's own error, at most
-//!   `max_um` of its header's `contact_radius_error` at any point, which projects to at
-//!   most `r = max_um sum_i |s_i| / sum_i s_i^2` in ln E2, added in quadrature. The
-//!   per-pressure and per-replicate estimates are corrected the same way.
-//! - Finer reference not converged (a plain finer mesh level): the fit keeps its estimate
-//!   and widens its interval by `|d|` in quadrature.
+//!   (A sample whose true radii are the finer model's is fitted at E with the production
+//!   model, so a(E) ~ a_fine(E_true) and a_fine(E) - a(E) ~ s (ln E - ln E_true).)
+//!   With a converged finer table the estimate is corrected, E -> E exp(-d), the interval
+//!   moves with it and the finer table's own error `r` is added as above; the per-pressure
+//!   and per-replicate estimates are corrected the same way. With a plain finer mesh level
+//!   the fit keeps its estimate and widens its interval by `|d|` in quadrature.
 
 use fem_core::lut::Lut;
 
@@ -185,25 +186,68 @@ fn correct_partial_estimates(
     }
 }
 
-/// The shipped finer table (`fem_core::shipped::fine_lut_path`) if it is `lut`'s grid on a
-/// finer mesh; `None` for any other table (a user's own grid has no such estimate).
+/// The table's own estimated error of a when it is converged (solved with the edge band and
+/// its header records the estimate), `None` for a production-mesh table.
+pub fn converged_error(lut: &Lut) -> Option<fem_core::discretisation::ContactRadiusError> {
+    lut.contact_radius_error.filter(|_| lut.edge_band.is_some())
+}
+
+/// Carries a converged table's own error into `fit` (see the module documentation): the
+/// estimate is kept and the interval widened in quadrature by that error projected on ln E2,
+/// the per-pressure intervals by their own points' projection. Records the term in
+/// `discretisation_residual_ln`.
+pub fn apply_converged_table_error(
+    fit: &mut ModulusFit,
+    model: &LutModel,
+    points: &[FitPoint],
+    max_um: f64,
+) {
+    let Some(residual) = projected_error_ln(model, fit.modulus_kpa, points, max_um * 1e-3) else {
+        return;
+    };
+    fit.discretisation_residual_ln = Some(residual);
+    fit.ci95_kpa = widened([fit.ci95_kpa[0].ln(), fit.ci95_kpa[1].ln()], residual);
+    for pf in fit.per_pressure.iter_mut() {
+        let at_p: Vec<FitPoint> = points
+            .iter()
+            .filter(|q| q.p_air_kpa == pf.p_air_kpa)
+            .copied()
+            .collect();
+        if let Some(r) = projected_error_ln(model, pf.modulus_kpa, &at_p, max_um * 1e-3) {
+            pf.ci95_kpa = widened([pf.ci95_kpa[0].ln(), pf.ci95_kpa[1].ln()], r);
+        }
+    }
+    fit.ci_description.push_str(&format!(
+        "; plus in quadrature the converged table's own error ({max_um:.1} um in a at most) = {residual:.4}"
+    ));
+}
+
+/// The shipped converged table (`fem_core::shipped::default_lut_path`) if it is `lut`'s
+/// grid on a finer mesh; `None` for any other table (a user's own grid has no such
+/// estimate, and the converged table is not finer than itself).
 pub fn shipped_finer_table(lut: &Lut) -> Option<Lut> {
-    let fine = fem_core::lut::read_lut(&fem_core::shipped::fine_lut_path()).ok()?;
+    let fine = fem_core::lut::read_lut(&fem_core::shipped::default_lut_path()).ok()?;
     is_finer_version_of(&fine.lut, lut).then_some(fine.lut)
 }
 
-/// [`fit_modulus`], then the model's discretisation term ([`apply_discretisation_term`])
-/// when the shipped finer table matches the model's table. The term compares the two tables
-/// themselves (a model's augmentation is the same on both meshes, so it is left out).
+/// [`fit_modulus`], then the model's discretisation term: the table's own error when it is
+/// converged ([`apply_converged_table_error`]), else the correction to the shipped converged
+/// table when that is the model's table's grid solved finer ([`apply_discretisation_term`]).
+/// The term is the tables' own (a model's augmentation is the same on both meshes, so it is
+/// left out).
 pub fn fit_modulus_with_model_error(
     model: &LutModel,
     points: &[FitPoint],
     options: FitOptions,
 ) -> Result<ModulusFit, FitError> {
     let mut fit = fit_modulus(model, points, options)?;
-    if let Some(fine) = shipped_finer_table(model.lut())
+    let Ok(table) = LutModel::new(model.lut()) else {
+        return Ok(fit);
+    };
+    if let Some(error) = converged_error(model.lut()) {
+        apply_converged_table_error(&mut fit, &table, points, error.max_um);
+    } else if let Some(fine) = shipped_finer_table(model.lut())
         && let Ok(fine_model) = LutModel::new(&fine)
-        && let Ok(table) = LutModel::new(model.lut())
     {
         apply_discretisation_term(&mut fit, &table, &fine_model, points);
     }

@@ -155,8 +155,9 @@ pub struct ModulusFit {
     pub discretisation_bias_ln: Option<f64>,
     /// The estimate before that correction (the table's own), when it was corrected.
     pub modulus_production_kpa: Option<f64>,
-    /// The converged reference's own error projected on ln E2, added in quadrature to the
-    /// interval when the estimate was corrected.
+    /// The converged model's own error of a (its header's largest) projected on ln E2 and
+    /// added in quadrature to the interval: the fit's table's own when that table is
+    /// converged, else the finer reference's when the estimate was corrected to it.
     pub discretisation_residual_ln: Option<f64>,
     pub load_channel_used: bool,
     pub rms_residual_load_n: Option<f64>,

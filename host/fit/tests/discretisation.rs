@@ -1,13 +1,14 @@
-//! The discretisation term of the fit: the shipped production table and its converged
-//! twin, the term predicting the bias that fitting the production model to converged data
-//! actually shows, and the correction it makes.
+//! The discretisation term of the fit: the shipped production-mesh table and its converged
+//! twin (the shipped `default.lut`), the term predicting the bias that fitting the
+//! production model to converged data actually shows, the correction it makes, and the
+//! converged table's own error in its interval.
 
 #![allow(clippy::unwrap_used)] // tests may unwrap: a panic fails the test with its message
 
 use fem_core::lut::read_lut;
 use fit::discretisation::{
-    apply_discretisation_term, discretisation_bias_ln, fit_modulus_with_model_error,
-    is_finer_version_of,
+    apply_discretisation_term, converged_error, discretisation_bias_ln,
+    fit_modulus_with_model_error, is_finer_version_of, projected_error_ln,
 };
 use fit::{FitOptions, FitPoint, LutModel, fit_modulus};
 
@@ -28,11 +29,13 @@ fn points(model: &LutModel, e: f64, p: f64) -> Vec<FitPoint> {
 }
 
 #[test]
-fn the_shipped_fine_table_is_the_production_grid_converged() {
-    let coarse = read_lut(&fem_core::shipped::default_lut_path())
+fn the_shipped_table_is_the_production_mesh_grid_converged() {
+    let coarse = read_lut(&fem_core::shipped::production_mesh_lut_path())
         .unwrap()
         .lut;
-    let fine = read_lut(&fem_core::shipped::fine_lut_path()).unwrap().lut;
+    let fine = read_lut(&fem_core::shipped::default_lut_path())
+        .unwrap()
+        .lut;
     assert!(is_finer_version_of(&fine, &coarse));
     assert!(!is_finer_version_of(&coarse, &fine));
     assert!(!is_finer_version_of(&coarse, &coarse));
@@ -50,10 +53,12 @@ fn the_shipped_fine_table_is_the_production_grid_converged() {
 
 #[test]
 fn the_term_predicts_the_bias_of_fitting_finer_mesh_data() {
-    let coarse = read_lut(&fem_core::shipped::default_lut_path())
+    let coarse = read_lut(&fem_core::shipped::production_mesh_lut_path())
         .unwrap()
         .lut;
-    let fine = read_lut(&fem_core::shipped::fine_lut_path()).unwrap().lut;
+    let fine = read_lut(&fem_core::shipped::default_lut_path())
+        .unwrap()
+        .lut;
     let (model, fine_model) = (
         LutModel::new(&coarse).unwrap(),
         LutModel::new(&fine).unwrap(),
@@ -99,7 +104,7 @@ fn the_term_predicts_the_bias_of_fitting_finer_mesh_data() {
 /// higher (the band and its error estimate set): data made of the twin fit 2 % low with the
 /// production table.
 fn production_and_relabelled_twin() -> (fem_core::lut::Lut, fem_core::lut::Lut) {
-    let coarse = read_lut(&fem_core::shipped::default_lut_path())
+    let coarse = read_lut(&fem_core::shipped::production_mesh_lut_path())
         .unwrap()
         .lut;
     let mut twin = coarse.clone();
@@ -189,4 +194,47 @@ fn per_pressure_and_replicate_estimates_are_corrected_too() {
     for r in &corrected.replicate_moduli_kpa {
         assert!((r / e - 1.0).abs() < 1e-3, "{r}");
     }
+}
+
+/// The shipped table is converged: a fit with it keeps its estimate (no correction, no
+/// finer table), and its interval is the fit's own widened in quadrature by the table's
+/// own largest error of a (its header's `contact_radius_error`) projected on ln E2, at the
+/// joint and the per-pressure estimates.
+#[test]
+fn a_converged_table_keeps_its_estimate_and_adds_its_own_error() {
+    let table = read_lut(&fem_core::shipped::default_lut_path())
+        .unwrap()
+        .lut;
+    let error = converged_error(&table).expect("the shipped table is converged");
+    assert_eq!(error, fem_core::discretisation::EDGE_BAND);
+    let model = LutModel::new(&table).unwrap();
+    // between nodes, at both of the tool's pressures
+    let e = 300.0;
+    let mut data = points(&model, e, 6.0);
+    data.extend(points(&model, e, 15.0));
+    let plain = fit_modulus(&model, &data, FitOptions::default()).unwrap();
+    let with_error = fit_modulus_with_model_error(&model, &data, FitOptions::default()).unwrap();
+    assert_eq!(with_error.modulus_kpa, plain.modulus_kpa);
+    assert_eq!(with_error.discretisation_bias_ln, None);
+    assert_eq!(with_error.modulus_production_kpa, None);
+    let term = with_error.discretisation_residual_ln.unwrap();
+    let expected =
+        projected_error_ln(&model, plain.modulus_kpa, &data, error.max_um * 1e-3).unwrap();
+    assert_eq!(term, expected);
+    // the half-width in ln E2 grows in quadrature by exactly the term
+    let half = |c: [f64; 2]| 0.5 * (c[1] / c[0]).ln();
+    let (before, after) = (half(plain.ci95_kpa), half(with_error.ci95_kpa));
+    assert!((after * after - before * before - term * term).abs() < 1e-12 * (1.0 + after * after));
+    // 2.3 um against a sensitivity of a few tens of um per unit ln E2 at 300 kPa: a term of
+    // a few tenths of a percent to a few percent, not zero and not the whole range
+    assert!((1e-3..0.1).contains(&term), "term {term}");
+    for (pf, before) in with_error.per_pressure.iter().zip(&plain.per_pressure) {
+        assert_eq!(pf.modulus_kpa, before.modulus_kpa);
+        assert!(half(pf.ci95_kpa) > half(before.ci95_kpa), "{pf:?}");
+    }
+    assert!(
+        with_error
+            .ci_description
+            .contains("converged table's own error (2.3 um")
+    );
 }

@@ -15,7 +15,7 @@ use fit::{FitOptions, FitPoint, LutModel, fit_modulus};
 /// the first inflated node or above the last.
 #[test]
 fn the_estimate_is_the_parabola_through_three_inflated_nodes_minus_the_line() {
-    let lut = read_lut(&fem_core::shipped::default_lut_path())
+    let lut = read_lut(&fem_core::shipped::production_mesh_lut_path())
         .unwrap()
         .lut;
     assert_eq!(lut.grid.pressure_kpa, [0.0, 6.0, 10.0, 15.0, 20.0, 30.0]);
@@ -73,7 +73,7 @@ fn the_estimate_is_the_parabola_through_three_inflated_nodes_minus_the_line() {
 /// interval (noise and E2 interpolation only) misses it.
 #[test]
 fn the_term_has_the_size_of_the_error_a_direct_solve_shows_and_the_interval_covers_it() {
-    let lut = read_lut(&fem_core::shipped::default_lut_path())
+    let lut = read_lut(&fem_core::shipped::production_mesh_lut_path())
         .unwrap()
         .lut;
     let model = LutModel::new(&lut).unwrap();

@@ -38,9 +38,9 @@ pub struct DaemonArgs {
     /// $XDG_CONFIG_HOME/tactile/daemon.token or ~/.config/tactile/daemon.token.
     #[arg(long)]
     token_file: Option<PathBuf>,
-    /// Lookup table for the fit (default: the shipped production table,
-    /// fem-core/data/default.lut, with --sim too: the simulated sample is made of the
-    /// converged fem-core/data/default-fine.lut).
+    /// Lookup table for the fit (default: the shipped converged table,
+    /// fem-core/data/default.lut, with --sim too; the simulated sample is made of
+    /// fem-core/data/sim-samples.lut, the same settings midway between its moduli).
     #[arg(long)]
     lut: Option<PathBuf>,
     /// The setup's model file (`tactile diagnose --apply`): every experiment's fit uses the

@@ -28,7 +28,7 @@ pub struct DemoArgs {
     /// Record directory (default: records/demo-<UTC time>).
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Lookup table for the fit (default: the shipped production table, `default.lut`).
+    /// Lookup table for the fit (default: the shipped converged table, `default.lut`).
     #[arg(long)]
     pub lut: Option<PathBuf>,
     /// Indentations.

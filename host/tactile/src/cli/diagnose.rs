@@ -31,7 +31,7 @@ pub struct DiagnoseArgs {
     /// --simulate: the simulated curve CSV).
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Baseline table (default: the converged table fem-core/data/default-fine.lut; the
+    /// Baseline table (default: the converged table fem-core/data/default.lut; the
     /// effects are read from their tables as changes from the tables' base slice).
     #[arg(long)]
     pub lut: Option<PathBuf>,
@@ -225,7 +225,7 @@ fn load_tables(args: &DiagnoseArgs) -> Result<Tables, String> {
             if effects.is_empty() {
                 return Err("no effect tables found (build them with tactile diagnose --build-tables fem-core/data) and no --lut given".into());
             }
-            let p = fem_core::shipped::fine_lut_path();
+            let p = fem_core::shipped::default_lut_path();
             let f = fem_core::lut::read_lut(&p).map_err(|e| format!("{}: {e}", p.display()))?;
             (
                 f.lut,

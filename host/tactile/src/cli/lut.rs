@@ -35,8 +35,11 @@ pub enum LutCommand {
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
 pub enum GridName {
-    /// E2 10–1000 kPa (13 log-spaced), p_air 0, 6, 10, 15, 20, 30 kPa, production settings.
+    /// E2 10–1468 kPa (14 log-spaced), p_air 0, 6, 10, 15, 20, 30 kPa, production mesh (with --edge-band: the shipped default.lut).
     Default,
+    /// The default grid's end moduli and the midpoints between its moduli (15) at its
+    /// pressures: the simulated bench's samples (with --edge-band: the shipped sim-samples.lut).
+    SimSamples,
     /// 3 x 2 curves on a coarse mesh: a smoke test of the pipeline, not for fitting.
     Tiny,
 }
@@ -112,6 +115,7 @@ fn bad_input(e: impl std::fmt::Display) -> ExitCode {
 fn build(a: BuildArgs) -> ExitCode {
     let mut grid = match a.grid {
         GridName::Default => LutGrid::default_grid(),
+        GridName::SimSamples => LutGrid::sim_samples_grid(),
         GridName::Tiny => LutGrid::tiny_grid(),
     };
     if let Some(level) = a.mesh_level {

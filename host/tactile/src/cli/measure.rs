@@ -66,7 +66,7 @@ pub struct MeasureArgs {
     pub json: bool,
 }
 
-/// The shipped production table next to this crate.
+/// The shipped converged table next to this crate.
 pub fn default_lut_path() -> PathBuf {
     fem_core::shipped::default_lut_path()
 }
