@@ -167,7 +167,7 @@ pub fn calibrate_sim(
 }
 
 /// The daemon's default simulated bench: the paper's gelatin (200 kPa) with the mechanics
-/// read from `lut` (normally [`super::sim::sim_lut`], finer than the fit's table).
+/// read from `lut` (normally [`super::sim::sim_lut`]: the fit table's settings between its moduli).
 #[cfg(feature = "sim")]
 pub fn default_sim_scenario(lut: &Path) -> hil_sim::scenario::Scenario {
     hil_sim::scenario::Scenario {
