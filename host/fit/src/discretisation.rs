@@ -166,11 +166,7 @@ fn correct_partial_estimates(
     error_mm: f64,
 ) {
     for pf in fit.per_pressure.iter_mut() {
-        let at_p: Vec<FitPoint> = points
-            .iter()
-            .filter(|q| q.p_air_kpa == pf.p_air_kpa)
-            .copied()
-            .collect();
+        let at_p = points_at_pressure(points, pf.p_air_kpa);
         let Some(bias) = discretisation_bias_ln(model, fine, pf.modulus_kpa, &at_p) else {
             continue;
         };
@@ -184,6 +180,15 @@ fn correct_partial_estimates(
             *e *= (-bias).exp();
         }
     }
+}
+
+/// The points measured at `p_air_kpa` (a per-pressure estimate's own points).
+fn points_at_pressure(points: &[FitPoint], p_air_kpa: f64) -> Vec<FitPoint> {
+    points
+        .iter()
+        .filter(|q| q.p_air_kpa == p_air_kpa)
+        .copied()
+        .collect()
 }
 
 /// The table's own estimated error of a when it is converged (solved with the edge band and
@@ -208,11 +213,7 @@ pub fn apply_converged_table_error(
     fit.discretisation_residual_ln = Some(residual);
     fit.ci95_kpa = widened([fit.ci95_kpa[0].ln(), fit.ci95_kpa[1].ln()], residual);
     for pf in fit.per_pressure.iter_mut() {
-        let at_p: Vec<FitPoint> = points
-            .iter()
-            .filter(|q| q.p_air_kpa == pf.p_air_kpa)
-            .copied()
-            .collect();
+        let at_p = points_at_pressure(points, pf.p_air_kpa);
         if let Some(r) = projected_error_ln(model, pf.modulus_kpa, &at_p, max_um * 1e-3) {
             pf.ci95_kpa = widened([pf.ci95_kpa[0].ln(), pf.ci95_kpa[1].ln()], r);
         }
