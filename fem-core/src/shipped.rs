@@ -1,4 +1,5 @@
-//! Where the shipped tables (`default.lut`, `sim-samples.lut`, `default-production-mesh.lut`, the effect tables) are found: the folder named
+//! Where the shipped tables (`default.lut`, `sim-samples.lut`,
+//! `default-production-mesh.lut`, the effect tables) are found: the folder named
 //! by the environment variable [`DATA_DIR_VAR`] if set, otherwise this crate's `data/`
 //! folder in the source tree the binary was built from.
 

@@ -1,7 +1,6 @@
 //! A daemon on the simulated bench with test-friendly defaults (an ephemeral loopback
 //! port, the shipped table for the fit, the simulation table for the sample, patient link
-//! timeouts): used by the system tests, the
-//! benchmarks and `tactile daemon --sim`.
+//! timeouts): used by the system tests, the benchmarks and `tactile daemon --sim`.
 
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};

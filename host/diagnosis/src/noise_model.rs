@@ -60,7 +60,7 @@ use super::model::{Channel, Model};
 /// gave 7-10 false positives in 100 at 0.85, 3 at 1.1 (`diagnose_null`, `NULL_MODULUS_KPA`).
 /// [`lut_error_scale`] is an envelope over the measured ratios with that margin; this constant
 /// is its value at 170 kPa (and was the single scale before). The same calibration on the
-/// production mesh (level 0, the effect tables' base slices then and `default-production-mesh.lut`) gives smaller
+/// production mesh (level 0 without the band, as `default-production-mesh.lut`) gives smaller
 /// ratios on soft samples but larger ones on stiff samples, whose level -2 wiggles had
 /// shrunk: 0.16, 0.19, 0.23, 0.37, 0.27 and 0.62 at 17.8-121 kPa, 0.67 at 178, 0.61 at 261,
 /// 0.44 at 383 and 0.26 at 562 kPa; the envelope covers both levels.

@@ -50,6 +50,51 @@ fn json_output_has_the_documented_keys() {
     assert!(v["recommended_pressure_kpa"].as_f64().is_some());
 }
 
+/// `tactile fit` without `--lut` fits the shipped converged table directly: its own error
+/// of a is in the interval (`discretisation_residual_ln`) and nothing is corrected; the
+/// shipped production-mesh table is corrected to the converged one.
+#[test]
+fn the_default_table_is_the_converged_one_and_a_production_mesh_table_is_corrected() {
+    let fit = |lut: Option<PathBuf>| {
+        let mut cmd = tactile();
+        cmd.arg("fit")
+            .arg(data("fem_truth_E200_p6.csv"))
+            .arg("--json")
+            .env_remove("TACTILE_LUT")
+            .env_remove("TACTILE_DATA_DIR");
+        if let Some(lut) = lut {
+            cmd.arg("--lut").arg(lut);
+        }
+        let out = cmd.output().unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap()
+    };
+    let shipped = fit(None);
+    let term = shipped["fit"]["discretisation_residual_ln"]
+        .as_f64()
+        .unwrap();
+    // 2.3 um of a projected on ln E2 at 200 kPa / 6 kPa: a few tenths of a percent
+    assert!((1e-3..0.05).contains(&term), "{term}");
+    assert!(shipped["fit"]["modulus_production_kpa"].is_null());
+    assert!(shipped["fit"]["discretisation_bias_ln"].is_null());
+
+    let production_mesh = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fem-core/data/default-production-mesh.lut");
+    let corrected = fit(Some(production_mesh));
+    let own = corrected["fit"]["modulus_production_kpa"].as_f64().unwrap();
+    let bias = corrected["fit"]["discretisation_bias_ln"].as_f64().unwrap();
+    let e = corrected["modulus_kpa"].as_f64().unwrap();
+    // the estimate is the production-mesh table's own moved by the bias
+    assert!(
+        (e - own * (-bias).exp()).abs() < 1e-9 * e,
+        "{e} {own} {bias}"
+    );
+}
+
 #[test]
 fn malformed_csv_names_line_and_column_and_exits_2() {
     let path = temp_file("bad.csv", "# p_air_kpa: 6\nu_s_mm,a_mm\n0.1,0.5\n0.2,abc\n");
