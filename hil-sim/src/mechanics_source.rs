@@ -72,18 +72,21 @@ pub fn build_mechanics(
 /// The fem-core solves a `solve` mechanics source asks for (empty for other sources), in
 /// modulus-major order. They can be saved as JSON and used as a `curves` source.
 pub fn solve_curves(scenario: &Scenario) -> Result<Vec<Curve>, MechanicsSourceError> {
-    let edge_band = matches!(
-        scenario.mechanics,
+    let (edge_band, finer_band) = match scenario.mechanics {
         MechanicsSource::Solve {
-            edge_band: true,
+            edge_band,
+            finer_band,
             ..
-        }
-    );
+        } => (edge_band, finer_band),
+        _ => (false, false),
+    };
     solve_params(scenario)
         .into_iter()
         .map(|params| {
             let simulation = fem_core::Simulation::new(&params);
-            let simulation = if edge_band {
+            let simulation = if finer_band {
+                simulation.with_finer_edge_band()
+            } else if edge_band {
                 simulation.with_edge_band()
             } else {
                 simulation

@@ -80,6 +80,12 @@ pub enum MechanicsSource {
         /// samples too.
         #[serde(default)]
         edge_band: bool,
+        /// With `edge_band`, solve one refinement finer than the shipped tables' converged
+        /// settings (`fem_core::Simulation::with_finer_edge_band`: half the band's element
+        /// size, twice the wall's elements): a sample that shares neither the fit table's
+        /// nodes nor its discretisation. About four times the converged band's cost.
+        #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+        finer_band: bool,
     },
     /// A rigid flat sample (calibration).
     Rigid {},
@@ -416,9 +422,17 @@ impl Scenario {
             pressures_kpa,
             modulus_factors,
             steps,
+            edge_band,
+            finer_band,
             ..
         } = &self.mechanics
         {
+            if *finer_band && !*edge_band {
+                return bad(
+                    "mechanics.finer_band",
+                    "refines the edge band: set edge_band = true as well".into(),
+                );
+            }
             if pressures_kpa.is_empty()
                 || pressures_kpa.iter().any(|p| !(p.is_finite() && *p >= 0.0))
             {
@@ -531,6 +545,31 @@ mod tests {
                 }
             ));
         }
+    }
+
+    #[test]
+    fn a_finer_band_is_read_and_needs_the_band() {
+        let text = |band: bool| {
+            format!(
+                "[mechanics]\nsource = \"solve\"\npressures_kpa = [6.0]\nedge_band = {band}\nfiner_band = true\n"
+            )
+        };
+        let s = Scenario::parse(&text(true), Path::new("finer.toml")).unwrap();
+        assert!(matches!(
+            s.mechanics,
+            MechanicsSource::Solve {
+                edge_band: true,
+                finer_band: true,
+                ..
+            }
+        ));
+        let e = Scenario::parse(&text(false), Path::new("finer.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("finer.toml") && e.contains("mechanics.finer_band"),
+            "{e}"
+        );
     }
 
     #[test]

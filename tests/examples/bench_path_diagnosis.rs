@@ -197,6 +197,7 @@ fn run_case(
             progress: false,
             u_s_equals_h: false,
             firmware: None,
+            finer_truth: false,
         };
         run_demo_with(scenario.clone(), &options)
             .map_err(|e| format!("bench run at {p} kPa: {e}"))?;

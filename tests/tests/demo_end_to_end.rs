@@ -33,6 +33,7 @@ fn options(name: &str, modulus: f64, repeats: u32) -> DemoOptions {
         progress: false,
         u_s_equals_h: false,
         firmware: None,
+        finer_truth: false,
     }
 }
 

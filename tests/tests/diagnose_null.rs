@@ -11,7 +11,8 @@
 //! `NULL_SEEDS=N` runs the long check on fewer seeds (it then reports and fails, since the
 //! criterion needs >= 100); `NULL_MODULUS_KPA=E` at another true modulus (default 170);
 //! `NULL_WITHOUT_LOADS=1` drops the loads (the selection then reads the radius alone);
-//! `NULL_NOISE=N` simulates at noise level N (default 1).
+//! `NULL_NOISE=N` simulates at noise level N (default 1); `NULL_TRUTH=finer` solves the
+//! sample one refinement finer than the tables (`SimSpec::finer_truth`).
 
 use diagnosis::simulate::{SimSpec, simulate_with, truth_mechanics, truth_scenario};
 use diagnosis::tables::shipped_tables;
@@ -28,6 +29,7 @@ fn false_positives(seeds: u64, modulus_kpa: f64) -> (usize, Vec<String>, Vec<f64
             .ok()
             .and_then(|s| s.parse().ok())
             .unwrap_or(1.0),
+        finer_truth: std::env::var("NULL_TRUTH").is_ok_and(|v| v == "finer"),
         ..SimSpec::default()
     };
     let scenario = truth_scenario(&spec0);

@@ -614,6 +614,7 @@ fn the_demo_recovers_the_modulus_with_the_firmware_binary() {
         out: Some(out.clone()),
         repeats: 5,
         firmware: Some(elf()),
+        finer_truth: false,
         ..DemoOptions::default()
     };
     let report = run_demo_with(demo_scenario(modulus, pressure, 3), &options)

@@ -50,6 +50,23 @@ pub enum TableSolve {
     /// ([`crate::Simulation::with_edge_band`]): the converged contact radius, frictional
     /// curves too.
     EdgeBand,
+    /// The band one refinement finer ([`crate::Simulation::with_finer_edge_band`]): half
+    /// the band's element size, twice the wall's elements. For a simulated truth that
+    /// shares neither the fit tables' nodes nor their discretisation (about four times the
+    /// band's cost).
+    FinerEdgeBand,
+}
+
+impl TableSolve {
+    /// The simulation of one curve of a table built this way.
+    pub fn simulation(self, params: &CurveParams) -> crate::Simulation {
+        let plain = crate::Simulation::new(params);
+        match self {
+            TableSolve::Plain => plain,
+            TableSolve::EdgeBand => plain.with_edge_band(),
+            TableSolve::FinerEdgeBand => plain.with_finer_edge_band(),
+        }
+    }
 }
 
 /// [`build_lut`] with fem-core's own solver ([`solve_curve_for_table`] or its
@@ -74,35 +91,40 @@ pub fn build_fem_lut(
                 on_curve,
             )
         }
-        TableSolve::EdgeBand => {
+        TableSolve::EdgeBand | TableSolve::FinerEdgeBand => {
             let solver = |p: &CurveParams| {
-                let solution = band_simulation(p).solve()?;
+                let solution = solve.simulation(p).solve()?;
                 if let crate::StopReason::Stopped { error, .. } = &solution.stop {
                     on_stop(p, error);
                 }
                 Ok::<_, crate::FemError>(solution.curve)
             };
-            let description = edge_band_solver_description(grid);
+            let description = band_solver_description(grid, solve);
             let mut lut = build_lut(grid, shard, &solver, &description, on_curve)?;
-            lut.edge_band = band_simulation(&grid.curve_params(0))
+            lut.edge_band = solve
+                .simulation(&grid.curve_params(0))
                 .discretisation
                 .edge_band;
+            // the converged band's measured error; a finer table's own is smaller, so this
+            // bounds it
             lut.contact_radius_error = Some(crate::discretisation::EDGE_BAND);
             Ok(lut)
         }
     }
 }
 
-/// How a [`TableSolve::EdgeBand`] table solves its curves.
-fn band_simulation(params: &CurveParams) -> crate::Simulation {
-    crate::Simulation::new(params).with_edge_band()
-}
-
 /// Description of fem-core's solver with the band of fine elements at the contact edge
 /// ([`TableSolve::EdgeBand`]) for the curves of `grid`: its settings (mesh, band, Newton
 /// and each pressure's linear solver) as recorded in the tables it builds.
 pub fn edge_band_solver_description(grid: &LutGrid) -> String {
-    let base = band_simulation(&grid.curve_params(0));
+    band_solver_description(grid, TableSolve::EdgeBand)
+}
+
+/// [`edge_band_solver_description`] for either band ([`TableSolve::EdgeBand`] or
+/// [`TableSolve::FinerEdgeBand`]).
+pub fn band_solver_description(grid: &LutGrid, solve: TableSolve) -> String {
+    let simulation = |p: &CurveParams| solve.simulation(p);
+    let base = simulation(&grid.curve_params(0));
     let newton = &base.nonlinear_solver;
     format!(
         "{FEM_CORE_SOLVER} with {:?}, Newton relative tolerance {:e}, stagnation \
@@ -111,7 +133,7 @@ pub fn edge_band_solver_description(grid: &LutGrid) -> String {
         newton.relative_tolerance,
         newton.stagnation_limit,
         newton.predict_multipliers,
-        linear_solvers_of(grid, band_simulation),
+        linear_solvers_of(grid, simulation),
         crate::problem::OUTPUT_DEFINITIONS
     )
 }

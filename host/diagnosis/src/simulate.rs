@@ -130,6 +130,10 @@ pub struct SimSpec {
     pub speed_mm_per_s: f64,
     pub max_travel_mm: f64,
     pub seed: u64,
+    /// Solve the truth one refinement finer than the tables' converged settings
+    /// (`fem_core::Simulation::with_finer_edge_band`): clean data that shares neither the
+    /// baseline's nodes nor its discretisation. About four times the truth's solve time.
+    pub finer_truth: bool,
 }
 
 impl Default for SimSpec {
@@ -146,6 +150,7 @@ impl Default for SimSpec {
             speed_mm_per_s: 1.0,
             max_travel_mm: 1.8,
             seed: 1,
+            finer_truth: false,
         }
     }
 }
@@ -226,6 +231,7 @@ pub fn truth_scenario(spec: &SimSpec) -> Scenario {
         steps: TRUTH_STEPS,
         max_depth_mm: TRUTH_MAX_DEPTH_MM,
         edge_band: true,
+        finer_band: spec.finer_truth,
     };
     s
 }
@@ -333,11 +339,26 @@ pub fn truth_curves(scenario: &Scenario) -> Result<Vec<Curve>, TruthError> {
 }
 
 /// The solves [`truth_curves`] makes for `scenario`, one per curve: the sample as it is
-/// (its thickness, law, stiffening and friction), one converged solve with the band.
+/// (its thickness, law, stiffening and friction), one converged solve with the band, or
+/// one refinement finer when the scenario's source asks for it (`finer_band`).
 fn truth_solves(scenario: &Scenario) -> Vec<fem_core::Simulation> {
+    let finer = matches!(
+        scenario.mechanics,
+        MechanicsSource::Solve {
+            finer_band: true,
+            ..
+        }
+    );
     hil_sim::mechanics_source::solve_params(scenario)
         .iter()
-        .map(|params| fem_core::Simulation::new(params).with_edge_band())
+        .map(|params| {
+            let simulation = fem_core::Simulation::new(params);
+            if finer {
+                simulation.with_finer_edge_band()
+            } else {
+                simulation.with_edge_band()
+            }
+        })
         .collect()
 }
 

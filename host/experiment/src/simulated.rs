@@ -392,6 +392,10 @@ pub struct DemoOptions {
     /// Run this RP2040 firmware ELF in the emulated chip as the bench's controller
     /// (`hil_sim::firmware_emulation`) instead of the `firmware` library.
     pub firmware: Option<std::path::PathBuf>,
+    /// Solve the simulated sample one refinement finer than the fit table's converged
+    /// settings ([`refine_truth`]): the fit's error then includes the table's own
+    /// discretisation error. About four times the sample's solve time.
+    pub finer_truth: bool,
 }
 
 /// What the demo printed (and `--json` emits).
@@ -460,6 +464,7 @@ pub fn demo_scenario(modulus_kpa: f64, pressure_kpa: f64, seed: u64) -> Scenario
         steps: DEMO_STEPS,
         max_depth_mm: DEMO_MAX_DEPTH_MM,
         edge_band: true,
+        finer_band: false,
     };
     s
 }
@@ -480,6 +485,7 @@ pub fn rigid_scenario(scenario: &Scenario, pressure_kpa: f64) -> Scenario {
         steps: DEMO_STEPS,
         max_depth_mm: DEMO_MAX_DEPTH_MM,
         edge_band: false,
+        finer_band: false,
     };
     rigid.faults = Default::default();
     rigid.sample.stiffening = 0.0;
@@ -686,12 +692,45 @@ pub fn run_demo_with(scenario: Scenario, options: &DemoOptions) -> Result<DemoRe
 
 /// `tactile demo`.
 pub fn run_demo(options: &DemoOptions) -> Result<DemoReport, DemoError> {
-    let scenario = match &options.scenario {
-        Some(path) => Scenario::load(path).map_err(|e| DemoError::Scenario {
-            path: path.display().to_string(),
-            reason: e.to_string(),
-        })?,
-        None => demo_scenario(options.modulus_kpa, options.pressure_kpa, options.seed),
+    let (mut scenario, origin) = match &options.scenario {
+        Some(path) => (
+            Scenario::load(path).map_err(|e| DemoError::Scenario {
+                path: path.display().to_string(),
+                reason: e.to_string(),
+            })?,
+            path.display().to_string(),
+        ),
+        None => (
+            demo_scenario(options.modulus_kpa, options.pressure_kpa, options.seed),
+            "built-in demo scenario".to_string(),
+        ),
     };
+    if options.finer_truth {
+        refine_truth(&mut scenario).map_err(|reason| DemoError::Scenario {
+            path: origin,
+            reason,
+        })?;
+    }
     run_demo_with(scenario, options)
+}
+
+/// Make a scenario's sample a solve one refinement finer than the tables' converged
+/// settings (`fem_core::Simulation::with_finer_edge_band`). Only a `solve` source with the
+/// edge band has that refinement; any other source is an error saying so.
+pub fn refine_truth(scenario: &mut Scenario) -> Result<(), String> {
+    match &mut scenario.mechanics {
+        hil_sim::scenario::MechanicsSource::Solve {
+            edge_band: true,
+            finer_band,
+            ..
+        } => {
+            *finer_band = true;
+            Ok(())
+        }
+        _ => Err(
+            "a finer truth needs [mechanics] source = \"solve\" with edge_band = true \
+                  (the sample solved by fem-core with the converged contact radius)"
+                .into(),
+        ),
+    }
 }

@@ -27,6 +27,7 @@ fn rigid_bench_scenario() -> Scenario {
         steps: 40,
         max_depth_mm: 1.9,
         edge_band: false,
+        finer_band: false,
     };
     s
 }
