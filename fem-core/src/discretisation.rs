@@ -22,13 +22,18 @@ pub struct ContactRadiusError {
 }
 
 /// The error of a with the band of fine elements that follows the contact edge
-/// ([`crate::edge_band::EdgeBand::CONVERGED`]), against bands of 12.5 um elements fixed
-/// around the edge at four depths on four curves (rigid plate at 6 kPa, 1000 kPa at
-/// 15 kPa, 200 kPa at 6 kPa, 10 kPa at 0 kPa; docs/fem-verification.md): the largest
-/// difference and the RMS over those 16 points.
+/// ([`crate::edge_band::EdgeBand::CONVERGED`]). The RMS is the largest of two studies,
+/// the largest difference the largest of both, rounded up to 0.1 um:
+/// - against bands of 12.5 um elements fixed around the edge at four depths on four curves
+///   (rigid plate at 6 kPa, 1000 kPa at 15 kPa, 200 kPa at 6 kPa, 10 kPa at 0 kPa;
+///   docs/fem-verification.md): 1.7 um RMS, 2.3 um largest over those 16 points;
+/// - against whole curves solved one refinement finer (12.5 um band elements and sixteen
+///   through the wall, [`crate::Simulation::with_finer_edge_band`]; h >= 0.2 mm): at
+///   1000 kPa / 15 kPa, 1.41 um RMS and 2.95 um largest, the difference scattering from
+///   step to step about a mean of +0.7 um (`fem-core/tests/edge_band.rs`).
 pub const EDGE_BAND: ContactRadiusError = ContactRadiusError {
     rms_um: 1.7,
-    max_um: 2.3,
+    max_um: 3.0,
 };
 
 /// The measured error of a at `mesh_level` (see the module documentation); `None` for

@@ -86,10 +86,10 @@ impl EdgeBand {
 
     /// [`EdgeBand::CONVERGED`] refined once along the surfaces (12.5 um elements): with
     /// [`FINER_WALL_ELEMENTS`] through the wall, the discretisation of a simulated truth
-    /// that does not share the tables' ([`crate::Simulation::with_finer_edge_band`]). At
-    /// 200 kPa / 6 kPa (60 steps to 1.9 mm) its a differs from the converged settings' by
-    /// at most 1.1 um at equal u_s, inside the 2.3 um the tables' headers state, for about
-    /// four times the time.
+    /// that does not share the tables' ([`crate::Simulation::with_finer_edge_band`]). The
+    /// converged settings' a differs from it by 1.0 um at most at 200 kPa / 6 kPa and by
+    /// 1.4 um RMS, 2.95 um at most at 1000 kPa / 15 kPa (docs/fem-verification.md), for
+    /// about four times the time.
     pub const FINER: Self = Self {
         fine_size_mm: 0.0125,
         ..Self::CONVERGED
