@@ -1,10 +1,10 @@
 //! What interpolation across E2 adds to a table's contact radius, read against another
-//! table's curves at moduli between the first table's nodes: the shipped
-//! `sim-samples-converged.lut` holds converged solves (the settings of `default.lut`) at the
-//! geometric midpoints of `default.lut`'s moduli, so
+//! table's curves at moduli between the first table's nodes: the shipped `sim-samples.lut`
+//! holds converged solves (the settings of `default.lut`) at the geometric midpoints of
+//! `default.lut`'s moduli, so
 //!
 //! `cargo run --release -p fem-core --example interpolation_against_table --
-//! fem-core/data/default.lut fem-core/data/sim-samples-converged.lut`
+//! fem-core/data/default.lut fem-core/data/sim-samples.lut`
 //!
 //! measures `default.lut`'s interpolation at its own spacing at every pressure, with no
 //! solve (the `interpolation_error` example solves the midpoints itself, about 30 s per

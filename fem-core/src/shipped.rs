@@ -1,4 +1,4 @@
-//! Where the shipped tables (`default.lut`, `sim-samples.lut`, `sim-samples-converged.lut`,
+//! Where the shipped tables (`default.lut`, `sim-samples.lut`,
 //! `default-production-mesh.lut`, the effect tables) are found: the folder named
 //! by the environment variable [`DATA_DIR_VAR`] if set, otherwise this crate's `data/`
 //! folder in the source tree the binary was built from.
@@ -24,21 +24,11 @@ pub fn default_lut_path() -> PathBuf {
     data_dir().join("default.lut")
 }
 
-/// What the simulated bench's samples are made of, `sim-samples.lut`: solves one
-/// refinement finer than `default.lut`'s converged settings
-/// (`Simulation::with_finer_edge_band`) on the moduli midway between its moduli (and its two
-/// ends), so that a simulated sample shares neither the fit's nodes nor its
-/// discretisation.
+/// What the simulated bench's samples are made of, `sim-samples.lut`: the same converged
+/// settings on the moduli midway between `default.lut`'s (and its two ends), so that a
+/// simulated sample is not read from the nodes the fit reads.
 pub fn sim_samples_lut_path() -> PathBuf {
     data_dir().join("sim-samples.lut")
-}
-
-/// The `sim-samples` grid at `default.lut`'s own converged settings,
-/// `sim-samples-converged.lut`: against `default.lut` it measures the fit table's
-/// interpolation across the modulus alone, against `sim-samples.lut` the converged
-/// settings' own discretisation error. Studies only.
-pub fn sim_samples_converged_lut_path() -> PathBuf {
-    data_dir().join("sim-samples-converged.lut")
 }
 
 /// The same grid on the production mesh without the band, `default-production-mesh.lut`:

@@ -10,8 +10,8 @@
 #![allow(clippy::unwrap_used)]
 
 use fem_core::lut::{
-    EffectSelection, GridIndex, LutCurve, LutFile, LutQuery, OutOfRange, TableSolve,
-    band_solver_description, edge_band_solver_description, fem_solver_description, read_lut,
+    EffectSelection, GridIndex, LutCurve, LutFile, LutQuery, OutOfRange,
+    edge_band_solver_description, fem_solver_description, read_lut,
 };
 use std::path::PathBuf;
 
@@ -170,46 +170,28 @@ fn the_converged_table_records_the_bands_current_settings() {
     assert!(f.lut.edge_band.is_some());
 }
 
-/// The simulated bench's sample table (`sim-samples.lut`) is solved one refinement finer
-/// than the converged table on the `sim-samples` grid (the default grid's ends and the
-/// midpoints between its moduli), and `sim-samples-converged.lut` is the same grid at the
-/// converged table's own settings: each records its band's current solver description, both
-/// hold the fit table's base parameters and error estimate and the axes of the named grid,
-/// none of their interior moduli one of the fit's.
+/// The simulated bench's sample table (`sim-samples.lut`) is the converged table's settings
+/// on the `sim-samples` grid (the default grid's ends and the midpoints between its moduli):
+/// the band's current solver description, the fit table's base parameters, band and error
+/// estimate, and the axes of the named grid, none of its interior moduli one of the fit's.
 #[test]
-fn the_sim_samples_tables_are_finer_and_converged_solves_between_the_fit_tables_moduli() {
-    let data = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data");
+fn the_sim_samples_table_is_the_converged_settings_between_the_fit_tables_moduli() {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data/sim-samples.lut");
+    let f = read_lut(&path).unwrap();
     let fit_table = converged();
     let grid = fem_core::lut::LutGrid::sim_samples_grid();
-    for (file, solve) in [
-        ("sim-samples.lut", TableSolve::FinerEdgeBand),
-        ("sim-samples-converged.lut", TableSolve::EdgeBand),
-    ] {
-        let f = read_lut(&data.join(file)).unwrap();
-        assert_eq!(f.lut.grid.modulus_kpa, grid.modulus_kpa, "{file}");
-        assert_eq!(f.lut.grid.pressure_kpa, grid.pressure_kpa, "{file}");
-        assert_eq!(f.lut.grid.base, fit_table.lut.grid.base, "{file}");
-        assert_eq!(
-            f.lut.solver,
-            band_solver_description(&f.lut.grid, solve),
-            "{file}: the band's settings changed since it was built"
-        );
-        assert_eq!(
-            f.lut.edge_band,
-            solve
-                .simulation(&f.lut.grid.curve_params(0))
-                .discretisation
-                .edge_band,
-            "{file}"
-        );
-        assert_eq!(
-            f.lut.contact_radius_error, fit_table.lut.contact_radius_error,
-            "{file}"
-        );
-        // no sample node is one of the fit's interior nodes
-        for e in &f.lut.grid.modulus_kpa[1..f.lut.grid.modulus_kpa.len() - 1] {
-            assert!(!fit_table.lut.grid.modulus_kpa.contains(e), "{file}: {e}");
-        }
+    assert_eq!(f.lut.grid.modulus_kpa, grid.modulus_kpa);
+    assert_eq!(f.lut.grid.pressure_kpa, grid.pressure_kpa);
+    assert_eq!(f.lut.grid.base, fit_table.lut.grid.base);
+    assert_eq!(f.lut.edge_band, fit_table.lut.edge_band);
+    assert_eq!(f.lut.solver, edge_band_solver_description(&f.lut.grid));
+    assert_eq!(
+        f.lut.contact_radius_error,
+        fit_table.lut.contact_radius_error
+    );
+    // no sample node is one of the fit's interior nodes
+    for e in &f.lut.grid.modulus_kpa[1..f.lut.grid.modulus_kpa.len() - 1] {
+        assert!(!fit_table.lut.grid.modulus_kpa.contains(e), "{e}");
     }
 }
 

@@ -101,10 +101,9 @@ fn default_max_depth() -> f64 {
     2.0
 }
 
-/// The sample's mechanics default to the shipped simulation table (`sim-samples.lut`: solves
-/// one refinement finer than the host's `default.lut` on the moduli midway between its
-/// nodes), so that a simulated sample shares neither the nodes the fit reads nor their
-/// discretisation.
+/// The sample's mechanics default to the shipped simulation table (`sim-samples.lut`: the
+/// converged settings of the host's `default.lut` on the moduli midway between its nodes),
+/// so that a simulated sample is not read from the nodes the fit reads.
 impl Default for MechanicsSource {
     fn default() -> Self {
         Self::Lut {

@@ -174,11 +174,9 @@ impl LutGrid {
 
     /// The simulated bench's sample grid: the default grid's two end moduli and the
     /// geometric midpoints between its neighbouring moduli (15 in all, rounded to 4
-    /// significant digits), at its pressures and base. Built with the edge band one
-    /// refinement finer it is the shipped `sim-samples.lut`: samples read from it are
-    /// interpolated between other nodes than the fit's table and solved finer, so a
-    /// simulated run sees the fit's interpolation error and the table's own discretisation
-    /// error. Built with the edge band alone it is `sim-samples-converged.lut`.
+    /// significant digits), at its pressures and base. Built with the edge band it is the
+    /// shipped `sim-samples.lut`: samples read from it are interpolated between other nodes
+    /// than the fit's table, so a simulated run sees the fit's interpolation error.
     pub fn sim_samples_grid() -> Self {
         let default = Self::default_grid();
         let nodes = &default.modulus_kpa;

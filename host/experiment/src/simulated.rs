@@ -510,8 +510,20 @@ pub fn run_demo_with(scenario: Scenario, options: &DemoOptions) -> Result<DemoRe
     let mut notes = Vec::new();
     let lut_path = options.lut.clone().unwrap_or_else(demo_fit_lut_path);
     if options.lut.is_none() && options.scenario.is_none() {
+        let finer = matches!(
+            scenario.mechanics,
+            hil_sim::scenario::MechanicsSource::Solve {
+                finer_band: true,
+                ..
+            }
+        );
+        let truth = if finer {
+            "with the edge band one refinement finer than the table (12.5 um band elements, 16 through the wall)"
+        } else {
+            "with the edge band (the table's settings)"
+        };
         notes.push(format!(
-            "fit table: {} (the shipped table: mesh level 0 with the converged contact radius, the edge band); the simulated sample is solved directly at its exact modulus on mesh level {DEMO_MESH_LEVEL} with the edge band, not read from the table",
+            "fit table: {} (the shipped table: mesh level 0 with the converged contact radius, the edge band); the simulated sample is solved directly at its exact modulus on mesh level {DEMO_MESH_LEVEL} {truth}, not read from the table",
             lut_path.display()
         ));
     }
@@ -732,5 +744,32 @@ pub fn refine_truth(scenario: &mut Scenario) -> Result<(), String> {
                   (the sample solved by fem-core with the converged contact radius)"
                 .into(),
         ),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use hil_sim::scenario::MechanicsSource;
+
+    #[test]
+    fn a_finer_truth_refines_the_demo_sample_and_refuses_other_sources() {
+        let mut demo = demo_scenario(200.0, 6.0, 1);
+        refine_truth(&mut demo).unwrap();
+        assert!(matches!(
+            demo.mechanics,
+            MechanicsSource::Solve {
+                edge_band: true,
+                finer_band: true,
+                ..
+            }
+        ));
+        // the rigid reference is solved without the band: it has no finer band to take
+        let mut rigid = rigid_scenario(&demo_scenario(200.0, 6.0, 1), 6.0);
+        let e = refine_truth(&mut rigid).unwrap_err();
+        assert!(e.contains("edge_band = true"), "{e}");
+        let mut table = Scenario::default();
+        assert!(matches!(table.mechanics, MechanicsSource::Lut { .. }));
+        assert!(refine_truth(&mut table).is_err());
     }
 }

@@ -38,8 +38,7 @@ pub enum GridName {
     /// E2 10–1468 kPa (14 log-spaced), p_air 0, 6, 10, 15, 20, 30 kPa, production mesh (with --edge-band: the shipped default.lut).
     Default,
     /// The default grid's end moduli and the midpoints between its moduli (15) at its
-    /// pressures: the simulated bench's samples (with --edge-band --finer: the shipped
-    /// sim-samples.lut; with --edge-band: sim-samples-converged.lut).
+    /// pressures: the simulated bench's samples (with --edge-band: the shipped sim-samples.lut).
     SimSamples,
     /// 3 x 2 curves on a coarse mesh: a smoke test of the pipeline, not for fitting.
     Tiny,
@@ -78,10 +77,17 @@ pub struct BuildArgs {
     #[arg(long)]
     pub edge_band: bool,
     /// With --edge-band, one refinement finer (half the band's element size, sixteen
-    /// elements through the wall; about four times the band's time): a simulated truth
-    /// that does not share the fit tables' discretisation (the shipped sim-samples.lut).
+    /// elements through the wall; about four times the band's time): curves that do not
+    /// share the shipped tables' discretisation, to measure what it leaves
+    /// (fem-core's `band_against_finer` example).
     #[arg(long, requires = "edge_band")]
     pub finer: bool,
+    /// Replace the grid's modulus axis (kPa, comma-separated, increasing; e.g. 20,100,1000).
+    #[arg(long, value_delimiter = ',')]
+    pub modulus: Option<Vec<f64>>,
+    /// Replace the grid's internal pressure axis (kPa, comma-separated, increasing).
+    #[arg(long, value_delimiter = ',')]
+    pub pressure: Option<Vec<f64>>,
 }
 
 #[derive(Debug, Args)]
@@ -128,6 +134,12 @@ fn build(a: BuildArgs) -> ExitCode {
     }
     if let Some(steps) = a.steps {
         grid.base.steps = steps;
+    }
+    if let Some(v) = a.modulus {
+        grid.modulus_kpa = v;
+    }
+    if let Some(v) = a.pressure {
+        grid.pressure_kpa = v;
     }
     // effect axes; the base takes each axis' first value (as in the named grids)
     if let Some(v) = a.thickness {
