@@ -1,17 +1,18 @@
 #!/usr/bin/env bash
 # The demo's accuracy over many seeds and moduli: `tactile demo` (the shipped converged
-# table for the fit, a fem-core solve with the converged contact radius at the exact
-# modulus as the sample, the whole bench path) at every modulus x seed, 6 kPa below
+# table for the fit, a fem-core solve at the exact modulus one refinement finer than the
+# table as the sample, the whole bench path) at every modulus x seed, 6 kPa below
 # 300 kPa and 15 kPa above. Prints one line per run and a summary per modulus and overall:
 # median and largest |error|, how often the 95 % interval covers the true modulus, and the
 # median half-width of the interval with the share of it that is the converged table's own
 # error term (`discretisation_residual_ln`, in % of E2).
 #
-#   scripts/demo_study.sh OUTDIR            # runs what OUTDIR does not hold yet (25-120 s each)
+#   scripts/demo_study.sh OUTDIR            # runs what OUTDIR does not hold yet (50-200 s each)
 #   MODULI="20 200" SEEDS="1 2" scripts/demo_study.sh OUTDIR
 #   TACTILE=path/to/tactile scripts/demo_study.sh OUTDIR   # default: target/release/tactile
-#   TRUTH=finer scripts/demo_study.sh OUTDIR   # the sample one refinement finer than the
-#                                              # fit table (`tactile demo --finer-truth`)
+#   TRUTH=converged scripts/demo_study.sh OUTDIR   # the sample at the fit table's own
+#                                                  # settings (default: one refinement finer,
+#                                                  # `tactile demo --truth finer`)
 #
 # Each run's JSON report stays in OUTDIR (out-E-SEED.json, its record in rec-E-SEED), so an
 # interrupted study carries on where it stopped; the record of a run that failed is moved
@@ -22,11 +23,10 @@ out=${1:?usage: scripts/demo_study.sh OUTDIR}
 tactile=${TACTILE:-target/release/tactile}
 moduli=${MODULI:-20 45 90 150 250 400 700 1000}
 seeds=${SEEDS:-11 12 13 14}
-truth_flag=()
-case "${TRUTH:-converged}" in
-    converged) ;;
-    finer) truth_flag=(--finer-truth) ;;
-    *) echo "demo_study: TRUTH must be converged or finer, got ${TRUTH}" >&2; exit 2 ;;
+truth=${TRUTH:-finer}
+case "$truth" in
+    converged | finer) ;;
+    *) echo "demo_study: TRUTH must be converged or finer, got ${truth}" >&2; exit 2 ;;
 esac
 [ -x "$tactile" ] || { echo "demo_study: $tactile missing (cargo build --release -p tactile)" >&2; exit 1; }
 mkdir -p "$out"
@@ -43,7 +43,7 @@ for seed in $seeds; do
             mv "$out/rec-$e-$seed" "$out/failed/rec-$e-$seed-$(date +%s)"
         fi
         "$tactile" demo --modulus "$e" --pressure "$p" --seed "$seed" --out "$out/rec-$e-$seed" \
-            "${truth_flag[@]}" --json >"$f" 2>"$out/err-$e-$seed.txt" || {
+            --truth "$truth" --json >"$f" 2>"$out/err-$e-$seed.txt" || {
             echo "demo_study: E2 $e seed $seed failed: $(tail -n 1 "$out/err-$e-$seed.txt")" >&2
             rm -f "$f"
         }

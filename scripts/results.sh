@@ -20,8 +20,8 @@ page=docs/results.md
 # bash from the repository root). Order = order of the page.
 sections=(
     "demo@@@@for ep in 25:6 60:6 120:6 200:6 350:15 600:15 1000:15; do echo \"true E2 \${ep%:*} kPa at \${ep#*:} kPa:\"; cargo run -q --release -p tactile -- demo --modulus \${ep%:*} --pressure \${ep#*:} --seed 3 2>&1 | grep -E '^(E2 =|simulated sample|error)' | sed 's/^/    /'; done"
-    "demo-seeds@@^(E2 kPa|[0-9]|all:)@@cargo build -q --release -p tactile && scripts/demo_study.sh target/demo-study"
-    "demo-midpoints@@^(E2 kPa|[0-9]|all:)@@cargo build -q --release -p tactile && MODULI=\"26 56 121 178 261 383 562 825\" SEEDS=\"21 22 23 24\" scripts/demo_study.sh target/demo-midpoints"
+    "demo-seeds@@^(E2 kPa|[0-9]|all:)@@cargo build -q --release -p tactile && TRUTH=converged scripts/demo_study.sh target/demo-study"
+    "demo-midpoints@@^(E2 kPa|[0-9]|all:)@@cargo build -q --release -p tactile && TRUTH=converged MODULI=\"26 56 121 178 261 383 562 825\" SEEDS=\"21 22 23 24\" scripts/demo_study.sh target/demo-midpoints"
     "demo-finer-truth@@^(E2 kPa|[0-9]|all:)@@cargo build -q --release -p tactile && TRUTH=finer MODULI=\"20 26 45 56 90 121 150 178 250 261 383 400 562 700 825 1000\" SEEDS=\"21 22\" scripts/demo_study.sh target/demo-finer-truth"
     "bench-measure@@@@cargo test -q -p tactile --release --test cli_calibrate -- --nocapture && cargo test -q --release -p system-tests --test measure_sim_bench -- --ignored --nocapture"
     "fit@@@@cargo test -q -p fit --release --test fit_lut -- --nocapture"

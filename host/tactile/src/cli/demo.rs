@@ -43,18 +43,34 @@ pub struct DemoArgs {
     /// library (needs Node.js and `npm ci` in emulator/).
     #[arg(long, value_name = "ELF")]
     pub firmware: Option<PathBuf>,
-    /// Solve the simulated sample one refinement finer than the fit table (half the edge
-    /// band's element size, sixteen elements through the shell's wall): the error printed
-    /// then includes the table's own discretisation error. About four times the sample's
-    /// solve time (40-80 s more on one core).
-    #[arg(long)]
-    pub finer_truth: bool,
+    /// How the sample is solved: `finer` (the default for the built-in sample), one
+    /// refinement finer than the fit table (half the edge band's element size, sixteen
+    /// elements through the shell's wall), so that the printed error includes the table's
+    /// own discretisation error; `converged`, the table's own settings, about four times
+    /// faster (30-60 s less on one core). With --scenario the file's `[mechanics]` decides
+    /// unless this is given (`finer` needs a `solve` source with `edge_band = true`).
+    #[arg(long, value_enum)]
+    pub truth: Option<Truth>,
     /// Print one JSON object.
     #[arg(long)]
     pub json: bool,
 }
 
+/// The discretisation of the simulated sample.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Truth {
+    /// One refinement finer than the fit table.
+    Finer,
+    /// The fit table's converged settings.
+    Converged,
+}
+
 pub fn run(args: DemoArgs) -> ExitCode {
+    // finer by default for the built-in sample; a scenario file's mechanics are its own
+    let finer_truth = match args.truth {
+        Some(t) => t == Truth::Finer,
+        None => args.scenario.is_none(),
+    };
     let options = DemoOptions {
         modulus_kpa: args.modulus,
         pressure_kpa: args.pressure,
@@ -66,7 +82,7 @@ pub fn run(args: DemoArgs) -> ExitCode {
         progress: !args.json,
         u_s_equals_h: args.u_s_equals_h,
         firmware: args.firmware,
-        finer_truth: args.finer_truth,
+        finer_truth,
     };
     match run_demo(&options) {
         Ok(report) => {
