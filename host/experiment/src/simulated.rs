@@ -433,6 +433,11 @@ pub enum DemoError {
     Record(#[from] crate::records::RecordError),
     #[error(transparent)]
     Run(#[from] super::pipeline::RunError),
+    #[error(
+        "{source} (the sample solved one refinement finer than the table did not reach the \
+         end of the travel; `--truth converged` solves it with the table's own settings)"
+    )]
+    FinerTruth { source: SimRunError },
 }
 
 impl DemoError {
@@ -723,7 +728,15 @@ pub fn run_demo(options: &DemoOptions) -> Result<DemoReport, DemoError> {
             reason,
         })?;
     }
-    run_demo_with(scenario, options)
+    run_demo_with(scenario, options).map_err(|e| match e {
+        // the finer band can fail to move near the end of a soft sample's travel
+        DemoError::Sim(source @ SimRunError::Sim(_))
+            if options.finer_truth && source.to_string().contains("fem-core solve") =>
+        {
+            DemoError::FinerTruth { source }
+        }
+        other => other,
+    })
 }
 
 /// Make a scenario's sample a solve one refinement finer than the tables' converged
