@@ -66,7 +66,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "p_air kPa  curves  a RMS um  a largest um (E2 kPa, h mm)   u_s largest um  load largest"
     );
     let mut pressures: Vec<f64> = pairs.iter().map(|p| p.pressure_kpa).collect();
-    pressures.dedup();
     pressures.sort_by(f64::total_cmp);
     pressures.dedup();
     for &p in &pressures {

@@ -273,3 +273,44 @@ fn tables_record_the_edge_band_and_plain_tables_keep_their_bytes() {
     assert_eq!(back.header.mesh.edge_band, banded.edge_band);
     assert_eq!(back.lut, banded);
 }
+
+/// A table built one refinement finer solves every curve with half the band's element size
+/// and twice its wall elements, and its recorded solver description says so: it differs
+/// from the converged band's, so a finer table can never pass for a converged one (the
+/// shipped tables' description checks compare with `edge_band_solver_description`).
+#[test]
+fn a_finer_table_solves_and_records_the_finer_band() {
+    use fem_core::lut::{TableSolve, band_solver_description, edge_band_solver_description};
+    let grid = LutGrid::tiny_grid();
+    let params = grid.curve_params(0);
+    let converged = TableSolve::EdgeBand.simulation(&params);
+    let finer = TableSolve::FinerEdgeBand.simulation(&params);
+    assert_eq!(
+        converged.discretisation.edge_band,
+        Some(fem_core::edge_band::EdgeBand::CONVERGED)
+    );
+    assert_eq!(
+        finer.discretisation.edge_band,
+        Some(fem_core::edge_band::EdgeBand::FINER)
+    );
+    assert_eq!(
+        finer.discretisation.edge_band.unwrap().fine_size_mm,
+        0.5 * converged.discretisation.edge_band.unwrap().fine_size_mm
+    );
+    assert_eq!(
+        finer.discretisation.mesh.shell.thickness,
+        2 * converged.discretisation.mesh.shell.thickness
+    );
+    // everything else of the band's settings is the same
+    assert_eq!(
+        finer.nonlinear_solver.relative_tolerance,
+        converged.nonlinear_solver.relative_tolerance
+    );
+    let described = band_solver_description(&grid, TableSolve::FinerEdgeBand);
+    assert_ne!(described, edge_band_solver_description(&grid));
+    assert!(described.contains("fine_size_mm: 0.0125"), "{described}");
+    assert_eq!(
+        band_solver_description(&grid, TableSolve::EdgeBand),
+        edge_band_solver_description(&grid)
+    );
+}

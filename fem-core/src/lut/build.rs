@@ -105,8 +105,8 @@ pub fn build_fem_lut(
                 .simulation(&grid.curve_params(0))
                 .discretisation
                 .edge_band;
-            // the converged band's measured error; a finer table's own is smaller, so this
-            // bounds it
+            // the converged band's measured error; a finer table's own is not measured and
+            // records the same figure
             lut.contact_radius_error = Some(crate::discretisation::EDGE_BAND);
             Ok(lut)
         }
