@@ -3,7 +3,8 @@
 //! `cargo run -p fem-core --release --example solver_trace -- [modulus_kpa] [pressure_kpa]
 //! [mesh_level] [friction] [steps] [depth_mm]`; `FEM_CHORD=0` disables the chord iterations (full Newton
 //! only), `FEM_CHORD=N,Q` allows N of them per solve with contraction Q; `FEM_EDGE_BAND=1`
-//! solves with the band of fine elements at the contact edge, `FEM_CONTACT_CURVATURE=0|1`
+//! solves with the band of fine elements at the contact edge (`FEM_FINER_BAND=1`: one
+//! refinement finer), `FEM_CONTACT_CURVATURE=0|1`
 //! leaves out or includes the master surface's curvature in the contact tangent.
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -22,7 +23,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         ..Default::default()
     };
     let mut sim = fem_core::Simulation::new(&params);
-    if std::env::var_os("FEM_EDGE_BAND").is_some() {
+    if std::env::var_os("FEM_FINER_BAND").is_some() {
+        sim = sim.with_finer_edge_band();
+    } else if std::env::var_os("FEM_EDGE_BAND").is_some() {
         sim = sim.with_edge_band();
     }
     if let Ok(v) = std::env::var("FEM_CONTACT_CURVATURE") {
@@ -97,6 +100,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         work.assembly_seconds,
         work.solve_seconds,
         work.fallbacks
+    );
+    println!(
+        "band: {} moves, {} failed transfers, {} restarts from the start on the moved mesh",
+        ind.band_moves, ind.band_move_failures, ind.band_restarts
     );
     println!("curve solve {seconds:.3} s");
     if std::env::var_os("FEM_TRACE_POINTS").is_some() {

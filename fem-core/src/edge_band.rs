@@ -12,7 +12,9 @@
 //! interpolated onto it ([`transfer_block`]: exact for the old mesh's quadratic fields
 //! where the old elements are kept or subdivided) and the equilibrium at the same travel is
 //! solved again before the step. The edge itself stays inside fine elements of both meshes,
-//! so the contact state near it carries over.
+//! so the contact state near it carries over. If no transfer converges and the edge has
+//! reached the band's end, the travel so far is solved again from the start on the moved
+//! mesh instead, and the curve goes on from there.
 //!
 //! Friction carries over too. Its regularised Coulomb law (`crate::contact`) makes the
 //! tangential force a function of each slave's slip since a reference, its surface

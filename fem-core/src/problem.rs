@@ -451,6 +451,9 @@ pub struct Indentation {
     /// converge (retried at the next step); see [`crate::edge_band`].
     pub band_moves: usize,
     pub band_move_failures: usize,
+    /// Band moves that needed the travel solved again from the start on the new mesh
+    /// (after every transfer failed; counted in `band_moves` too).
+    pub band_restarts: usize,
     /// The band of fine elements of this mesh, if it has one.
     pub edge_window: Option<EdgeWindow>,
     /// Newton work of stage 2 on the meshes before this one (the band's earlier meshes and
@@ -675,6 +678,7 @@ impl Indentation {
             new_branch: false,
             band_moves: 0,
             band_move_failures: 0,
+            band_restarts: 0,
             edge_window: settings.mesh.edge_window,
             earlier_meshes: NewtonWork::default(),
         }
@@ -1285,6 +1289,7 @@ impl Indentation {
         self.stage1_stats = old.stage1_stats.clone();
         self.band_moves = old.band_moves;
         self.band_move_failures = old.band_move_failures;
+        self.band_restarts = old.band_restarts;
         self.earlier_meshes = old.stage2_work();
         u_new
     }
@@ -1794,9 +1799,39 @@ pub(crate) fn solve_stages(
                         ind.snap_through_path = std::mem::take(&mut moved.snap_through_path);
                         ind.band_move_failures += 1;
                         let margin = 0.25 * b.half_width_mm;
-                        if last.a_mm > extent[1] - margin
-                            || (extent[0] > 0.0 && last.a_mm < extent[0] + margin)
-                        {
+                        let edge_leaves_band = last.a_mm > extent[1] - margin
+                            || (extent[0] > 0.0 && last.a_mm < extent[0] + margin);
+                        // the last resort before the curve stops: no transfer at all, the
+                        // travel so far solved again on the mesh whose band is centred on
+                        // the predicted edge (the finer band at 100 kPa and 6 kPa failed
+                        // every move from h = 1.7 mm, each transfer starting Newton at a
+                        // residual as large as the load, and stopped at 1.8 mm)
+                        let restarted = if edge_leaves_band {
+                            let mut fixed = settings.with_band(b, targets[0]);
+                            fixed.mesh.edge_window = Some(ind.band_over(&state, targets[0], b));
+                            restart_on_mesh(params, &fixed, k - 1, tune, unsymmetric_friction)
+                                .map(|(ind, state)| (ind, state, fixed))
+                        } else {
+                            None
+                        };
+                        if let Some((mut restarted, restarted_state, fixed)) = restarted {
+                            let mut attempts = std::mem::take(&mut ind.attempts);
+                            attempts.append(&mut restarted.attempts);
+                            restarted.attempts = attempts;
+                            restarted.snap_through_path =
+                                std::mem::take(&mut ind.snap_through_path);
+                            let mut work = ind.stage2_work();
+                            work.stats.add(&restarted.stage1_stats);
+                            restarted.earlier_meshes = work;
+                            restarted.stage1_stats = ind.stage1_stats.clone();
+                            restarted.band_moves = ind.band_moves + 1;
+                            restarted.band_move_failures = ind.band_move_failures;
+                            restarted.band_restarts = ind.band_restarts + 1;
+                            ind = restarted;
+                            state = restarted_state;
+                            current = fixed;
+                            band_extent = Some(targets[0]);
+                        } else if edge_leaves_band {
                             let e = FemError::NoConvergence {
                                 stage: "stage 2 (moving the edge band)",
                                 load: format!("{h_from:.6} mm of tube travel"),
@@ -1918,6 +1953,32 @@ pub(crate) fn solve_stages(
         solve_seconds: started.elapsed().as_secs_f64(),
     };
     Ok((curve, ind, state, stop))
+}
+
+/// The travel up to `increments` steps of `params`'s step solved from the start on the
+/// fixed mesh of `settings` (no band moves): the state at that travel as an equilibrium of
+/// this mesh reached along the path, with no transfer between meshes. None if it fails.
+fn restart_on_mesh(
+    params: &CurveParams,
+    settings: &SolverSettings,
+    increments: usize,
+    tune: &dyn Fn(&mut NewtonSettings),
+    unsymmetric_friction: bool,
+) -> Option<(Indentation, Vec<f64>)> {
+    if increments == 0 {
+        return None;
+    }
+    let mut fixed = settings.clone();
+    fixed.edge_band = None;
+    let dh = params.max_depth_mm / params.steps as f64;
+    let so_far = CurveParams {
+        max_depth_mm: dh * increments as f64,
+        steps: increments,
+        ..params.clone()
+    };
+    solve_stages(&so_far, &fixed, false, tune, unsymmetric_friction)
+        .ok()
+        .map(|(_, ind, state, _)| (ind, state))
 }
 
 #[cfg(test)]
