@@ -64,13 +64,15 @@ fn reproduces_a_hertz_like_modulus_dependence() {
     let (err_a, err_d) = sweep_errors(&table(6));
     // PCHIP with Fritsch–Butland slopes is third-order accurate on smooth data (slope error
     // O(dx^2), Fritsch & Carlson 1980): for f = exp(-x/3) on dx = ln(10)/6 that alone is
-    // ~1e-4. Near the u_s limit of the softer outer neighbour, that neighbour is continued
-    // linearly in u_s (see `interp`), which makes the scheme second order there: measured
-    // 3.9e-4 for a and 1.5e-2 for d a / d ln E2 (the derivative of a cubic Hermite loses one
-    // order). Tolerances: a factor ~2.5 and 2 above the measurements.
+    // ~1e-4. Beyond the u_s limit of the softer outer neighbour, that neighbour is continued
+    // linearly in u_s and fades out of the stencil (see `interp`), leaving the end-slope
+    // formula on three nodes, which is second order there: measured 7.5e-4 for a and
+    // 2.4e-2 for d a / d ln E2 (the derivative of a cubic Hermite loses one order; with
+    // the continuation kept everywhere 3.9e-4 and 1.5e-2 on this smooth stand-in, whose
+    // continuation is far better than a solved curve's). Tolerances: twice the measurements.
     println!("6 per decade: max rel error a {err_a:.2e}, da/dlnE {err_d:.2e}");
-    assert!(err_a < 1e-3, "a: {err_a}");
-    assert!(err_d < 3e-2, "da/dlnE: {err_d}");
+    assert!(err_a < 1.5e-3, "a: {err_a}");
+    assert!(err_d < 5e-2, "da/dlnE: {err_d}");
 }
 
 #[test]
@@ -81,8 +83,10 @@ fn error_shrinks_at_least_quadratically_with_the_spacing() {
         "6 per decade {e6:.2e}, 12 per decade {e12:.2e}, ratio {:.1}",
         e6 / e12
     );
-    // second order overall (see above): halving the spacing divides the error by ~4
-    // (measured 3.9); 3.5 would already fail for a first-order scheme (ratio 2).
+    // at least second order overall (see above): halving the spacing divides the error by
+    // at least ~4 (measured 8.1: at 12 per decade the outer neighbours' curves end closer
+    // to the bracketing ones', so less of the range is faded); 3.5 would already fail for
+    // a first-order scheme (ratio 2).
     assert!(e6 / e12 > 3.5, "ratio {}", e6 / e12);
 }
 
@@ -109,6 +113,93 @@ fn interpolant_is_continuous_in_u_s_where_a_neighbour_curve_ends() {
     };
     let (l, r) = (at(end - 1e-9), at(end + 1e-9));
     assert!((l - r).abs() < 1e-8, "jump {} at u_s = {end}", l - r);
+}
+
+/// An outer neighbour's linear continuation fades out over `EXTENSION_FADE_MM` of u_s
+/// beyond its curve's end: the interpolant stays continuous where the fade ends, and
+/// beyond it equals the PCHIP through the remaining nodes alone (the bracketing nodes and
+/// the outer neighbour on the other side).
+#[test]
+fn a_neighbours_continuation_fades_out_continuously() {
+    use fem_core::lut::interp::EXTENSION_FADE_MM;
+    // two nodes per decade (10, 31.6, 100, 316, 1000 kPa), so that an outer neighbour's
+    // curve ends more than the fade before the bracketing one's: at E2 = 562 kPa
+    // (p_air = 0) the stencil is 100 (ends at u_s 2 * 100 / 400 = 0.5 mm), 316 (ends at
+    // 1.03 mm) and 1000 kPa
+    let lut = table(2);
+    let slice = lut.slice(&EffectSelection::default()).unwrap();
+    let g = &lut.grid;
+    let e = 562.0;
+    let end = lut.curve(2).unwrap().u_s_mm.last().copied().unwrap();
+    let faded = end + EXTENSION_FADE_MM;
+    assert!(faded < lut.curve(3).unwrap().u_s_mm.last().copied().unwrap() - 0.02);
+    let at = |e: f64, u: f64| {
+        slice
+            .sample(
+                &LutQuery {
+                    modulus_kpa: e,
+                    pressure_kpa: 0.0,
+                    u_s_mm: u,
+                },
+                OutOfRange::Error,
+            )
+            .unwrap()
+    };
+    let (l, r) = (at(e, faded - 1e-9).a_mm, at(e, faded + 1e-9).a_mm);
+    assert!((l - r).abs() < 1e-8, "jump {} at u_s = {faded}", l - r);
+    for u in [faded + 1e-6, faded + 0.01, faded + 0.02] {
+        let nodes = [3, 4];
+        let xs: Vec<f64> = nodes.iter().map(|&k| g.modulus_kpa[k].ln()).collect();
+        // the table is exact on its nodes
+        let ys: Vec<f64> = nodes
+            .iter()
+            .map(|&k| at(g.modulus_kpa[k], u).a_mm)
+            .collect();
+        let (expected, slope) = fem_core::lut::pchip::eval(&xs, &ys, e.ln());
+        let s = at(e, u);
+        assert!(
+            (s.a_mm - expected).abs() < 1e-12,
+            "u_s {u}: {} against {expected}",
+            s.a_mm
+        );
+        assert!((s.da_dln_modulus_mm - slope).abs() < 1e-12, "u_s {u}");
+    }
+    // inside the fade both stencils take part: the result lies strictly between them
+    let u = end + 0.5 * EXTENSION_FADE_MM;
+    let nodes_without = [3, 4];
+    let nodes_with = [2, 3, 4];
+    let pchip_over = |nodes: &[usize]| {
+        let xs: Vec<f64> = nodes.iter().map(|&k| g.modulus_kpa[k].ln()).collect();
+        let ys: Vec<f64> = nodes
+            .iter()
+            .map(|&k| {
+                let c = lut.curve(g.flat_index(fem_core::lut::GridIndex {
+                    modulus: k,
+                    ..Default::default()
+                }));
+                let c = c.unwrap();
+                // the 100 kPa curve continued linearly with its curve's end slope
+                if u <= *c.u_s_mm.last().unwrap() {
+                    at(g.modulus_kpa[k], u).a_mm
+                } else {
+                    let n = c.u_s_mm.len();
+                    let slope = fem_core::lut::pchip::node_slope(&c.u_s_mm, &c.a_mm, n - 1);
+                    c.a_mm[n - 1] + slope * (u - c.u_s_mm[n - 1])
+                }
+            })
+            .collect();
+        fem_core::lut::pchip::eval(&xs, &ys, e.ln()).0
+    };
+    let (with, without) = (pchip_over(&nodes_with), pchip_over(&nodes_without));
+    assert!(
+        (with - without).abs() > 1e-6,
+        "the two stencils agree: a weak test"
+    );
+    let blended = at(e, u).a_mm;
+    assert!(
+        (blended - 0.5 * (with + without)).abs() < 1e-12,
+        "{blended} against {with} and {without}"
+    );
 }
 
 #[test]

@@ -9,9 +9,13 @@
 //!    slopes are local, so this equals the global PCHIP through those nodes). The two
 //!    bracketing curves must reach the queried u_s; an outer neighbour that does not (a
 //!    softer curve ends at a smaller u_s) is continued linearly in u_s from its last point
-//!    with its end slope, and only serves to estimate the node slope. That keeps the
-//!    stencil fixed, so the result is continuous in u_s and C1 in ln E2 (a fit over E2 is
-//!    smooth); d a / d ln E2 is the derivative of the cubic.
+//!    with its end slope, and only serves to estimate the node slope. A linear
+//!    continuation is good near the curve's end and poor far beyond it, so its part fades
+//!    out over [`EXTENSION_FADE_MM`] of u_s: the result is blended between the stencil with
+//!    that neighbour and the one without it, with the weight falling linearly from 1 at
+//!    the curve's end to 0 that far beyond. The result stays continuous in u_s and C1 in
+//!    ln E2 (a fit over E2 is smooth); d a / d ln E2 is the blend of the cubics'
+//!    derivatives.
 //! 3. Across p_air, linear between the bracketing pressure nodes.
 //!
 //! The u_s range that can be queried at a given E2 is that of the softer bracketing curve
@@ -180,6 +184,24 @@ impl Lut {
     }
 }
 
+/// Over how much u_s beyond its curve's range an outer stencil node's linear continuation
+/// fades out of the interpolation across E2 (mm). Chosen by cross-validation on converged
+/// solves at the geometric midpoints between `default.lut`'s moduli, at every inflated
+/// pressure up to u_s = 1.7 mm (`sim-samples-converged.lut`): chosen on every other
+/// midpoint and scored on the rest, both halves pick 0.4-0.6 mm, and 0.5 mm brings the
+/// largest error per pressure from 2.5-12.3 um (continuation everywhere) to 1.9-2.8 um,
+/// the RMS from 0.7-1.9 um to 0.6-0.8 um. A continuation dropped at once (0 mm) is worse
+/// in RMS than keeping it (0.8-1.7 um against 0.8-1.4 um over all midpoints).
+pub const EXTENSION_FADE_MM: f64 = 0.5;
+
+/// Weight of an outer stencil node's curve at u: 1 inside its u_s range, falling linearly
+/// to 0 at [`EXTENSION_FADE_MM`] beyond it.
+fn extension_weight(c: &PreparedCurve, u: f64) -> f64 {
+    let (lo, hi) = c.range();
+    let beyond = (lo - u).max(u - hi).max(0.0);
+    (1.0 - beyond / EXTENSION_FADE_MM).clamp(0.0, 1.0)
+}
+
 /// Bracketing nodes of `x` on an increasing axis: (i0, i1, weight of i1), after optional
 /// clamping. A single-node axis accepts only its value.
 fn bracket(
@@ -314,22 +336,59 @@ impl LutSlice<'_> {
     }
 
     /// PCHIP in ln E2 at pressure node j over the interval [ke, ke+1] (both covering u):
-    /// values of every quantity and d a / d ln E2.
+    /// values of every quantity and d a / d ln E2. Each outer neighbour continued beyond
+    /// its curve takes part with the weight [`extension_weight`]; with two of them the four
+    /// stencils (with both, either, neither) are blended with the products of the weights,
+    /// so that each stencil keeps its nodes and the blend stays continuous in u.
     fn across_modulus(&self, j: usize, ke: usize, x: f64, u: f64) -> ([f64; NQ], f64) {
         let row = &self.curves[j];
-        let usable = |e: usize| row[e].1.is_ok();
-        let first = if ke > 0 && usable(ke - 1) { ke - 1 } else { ke };
-        let last = if ke + 2 < row.len() && usable(ke + 2) {
-            ke + 2
-        } else {
-            ke + 1
+        let outer_weight = |e: Option<usize>| match e.and_then(|e| row.get(e)) {
+            Some((_, Ok(c))) => Some(extension_weight(c, u)),
+            _ => None,
         };
+        let below = outer_weight(ke.checked_sub(1));
+        let above = outer_weight(Some(ke + 2));
+        let mut out = [0.0; NQ];
+        let mut da = 0.0;
+        let options = |w: Option<f64>| match w {
+            None => vec![(false, 1.0)],
+            Some(w) if w >= 1.0 => vec![(true, 1.0)],
+            Some(w) if w <= 0.0 => vec![(false, 1.0)],
+            Some(w) => vec![(true, w), (false, 1.0 - w)],
+        };
+        for (with_below, wb) in options(below) {
+            for (with_above, wa) in options(above) {
+                let (v, d) = self.stencil(j, ke, x, u, with_below, with_above);
+                let w = wb * wa;
+                for i in 0..NQ {
+                    out[i] += w * v[i];
+                }
+                da += w * d;
+            }
+        }
+        (out, da)
+    }
+
+    /// PCHIP in ln E2 through the bracketing nodes ke, ke+1 and, if asked, the outer
+    /// neighbours ke-1 and ke+2 (continued linearly beyond their curves' u_s range).
+    fn stencil(
+        &self,
+        j: usize,
+        ke: usize,
+        x: f64,
+        u: f64,
+        with_below: bool,
+        with_above: bool,
+    ) -> ([f64; NQ], f64) {
+        let row = &self.curves[j];
+        let first = if with_below { ke - 1 } else { ke };
+        let last = if with_above { ke + 2 } else { ke + 1 };
         let xs = &self.ln_modulus[first..=last];
         let vals: Vec<[f64; NQ]> = (first..=last)
             .map(|e| match &row[e].1 {
                 Ok(c) if e == ke || e == ke + 1 => c.at(u),
                 Ok(c) => c.at_extended(u),
-                Err(_) => [f64::NAN; NQ], // unreachable: checked by the caller and `usable`
+                Err(_) => [f64::NAN; NQ], // unreachable: checked by the caller
             })
             .collect();
         let mut out = [0.0; NQ];
