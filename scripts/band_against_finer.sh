@@ -6,7 +6,7 @@
 #
 #   scripts/band_against_finer.sh [OUTDIR]    # default target/band-against-finer
 #
-# The tables are kept in OUTDIR and reused (the finer one takes about 15 min on two cores).
+# The tables are kept in OUTDIR and reused (the finer one takes about 7 min on two cores).
 # MODULI and PRESSURES (comma-separated, kPa) choose the grid.
 set -euo pipefail
 cd "$(dirname "$0")/.."

@@ -35,7 +35,7 @@ sections=(
     "edge-band@@^(E2|edge band|production - band)@@for c in '1e7 6' '200 6' '37 6' '1000 15'; do RAYON_NUM_THREADS=1 cargo run -q --release -p fem-core --example edge_band_curve -- \$c 1.7 34; done"
     "converged-truth@@@@scripts/converged_truth_fit.sh"
     "interpolation@@^(fem-core|p_air)@@for t in default-production-mesh default; do cargo run -q --release -p fem-core --example interpolation_error -- fem-core/data/\$t.lut 6,15; done"
-    "interpolation-all-pressures@@@@cargo run -q --release -p fem-core --example interpolation_against_table -- fem-core/data/default.lut fem-core/data/sim-samples.lut"
+    "interpolation-all-pressures@@@@cargo run -q --release -p fem-core --example interpolation_against_table -- fem-core/data/default.lut fem-core/data/sim-samples-converged.lut && cargo run -q --release -p fem-core --example interpolation_against_table -- fem-core/data/default.lut fem-core/data/sim-samples.lut"
     "band-against-finer@@@@scripts/band_against_finer.sh"
     "pressure-interpolation@@^(fem-core|p_air)@@cargo run -q --release -p fem-core --example interpolation_error -- fem-core/data/default-production-mesh.lut 3,8,12.5,17.5,25 nodes"
     "pressure-term@@^(the shipped|p_air|summary)@@cargo run -q --release -p fit --example pressure_interpolation_term"

@@ -1,10 +1,10 @@
 //! What interpolation across E2 adds to a table's contact radius, read against another
-//! table's curves at moduli between the first table's nodes: the shipped `sim-samples.lut`
-//! holds converged solves (the settings of `default.lut`) at the geometric midpoints of
-//! `default.lut`'s moduli, so
+//! table's curves at moduli between the first table's nodes: the shipped
+//! `sim-samples-converged.lut` holds converged solves (the settings of `default.lut`) at the
+//! geometric midpoints of `default.lut`'s moduli, so
 //!
 //! `cargo run --release -p fem-core --example interpolation_against_table --
-//! fem-core/data/default.lut fem-core/data/sim-samples.lut`
+//! fem-core/data/default.lut fem-core/data/sim-samples-converged.lut`
 //!
 //! measures `default.lut`'s interpolation at its own spacing at every pressure, with no
 //! solve (the `interpolation_error` example solves the midpoints itself, about 30 s per
@@ -12,7 +12,9 @@
 //! over the reference curves' load steps with u_s >= 0.2 mm inside the table's range, where
 //! the largest sits, and the same up to u_s = 1.7 mm (what `tactile measure`'s default
 //! travel of 1.7 mm reaches). Only reference moduli strictly between two of the table's
-//! nodes count.
+//! nodes count. Against `sim-samples.lut` (the same moduli solved one refinement finer,
+//! the simulated bench's samples) it measures the interpolation and the table's own
+//! discretisation together: how far the fit's reading is from the bench's sample there.
 
 use fem_core::lut::{EffectSelection, LutQuery, OutOfRange, read_lut};
 

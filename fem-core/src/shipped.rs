@@ -24,9 +24,11 @@ pub fn default_lut_path() -> PathBuf {
     data_dir().join("default.lut")
 }
 
-/// What the simulated bench's samples are made of, `sim-samples.lut`: the same converged
-/// settings on the moduli midway between `default.lut`'s (and its two ends), so that a
-/// simulated sample is not read from the nodes the fit reads.
+/// What the simulated bench's samples are made of, `sim-samples.lut`: solves one
+/// refinement finer than `default.lut`'s (the finer band) on the moduli midway between its
+/// moduli (and its two ends), so that a simulated sample shares neither the nodes nor the
+/// discretisation the fit reads. The same grid at `default.lut`'s own settings,
+/// `sim-samples-converged.lut`, measures `default.lut`'s interpolation.
 pub fn sim_samples_lut_path() -> PathBuf {
     data_dir().join("sim-samples.lut")
 }

@@ -10,8 +10,8 @@
 #![allow(clippy::unwrap_used)]
 
 use fem_core::lut::{
-    EffectSelection, GridIndex, LutCurve, LutFile, LutQuery, OutOfRange,
-    edge_band_solver_description, fem_solver_description, read_lut,
+    EffectSelection, GridIndex, LutCurve, LutFile, LutQuery, OutOfRange, TableSolve,
+    band_solver_description, edge_band_solver_description, fem_solver_description, read_lut,
 };
 use std::path::PathBuf;
 
@@ -170,29 +170,51 @@ fn the_converged_table_records_the_bands_current_settings() {
     assert!(f.lut.edge_band.is_some());
 }
 
-/// The simulated bench's sample table (`sim-samples.lut`) is the converged table's settings
-/// on the `sim-samples` grid (the default grid's ends and the midpoints between its moduli):
-/// the band's current solver description, the fit table's base parameters, band and error
-/// estimate, and the axes of the named grid, none of its interior moduli one of the fit's.
-#[test]
-fn the_sim_samples_table_is_the_converged_settings_between_the_fit_tables_moduli() {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data/sim-samples.lut");
-    let f = read_lut(&path).unwrap();
+/// The `sim-samples` grid (the default grid's ends and the midpoints between its moduli)
+/// with the fit table's base parameters and error estimate, and none of its interior
+/// moduli one of the fit's.
+fn assert_between_the_fit_tables_moduli(f: &LutFile) {
     let fit_table = converged();
     let grid = fem_core::lut::LutGrid::sim_samples_grid();
     assert_eq!(f.lut.grid.modulus_kpa, grid.modulus_kpa);
     assert_eq!(f.lut.grid.pressure_kpa, grid.pressure_kpa);
     assert_eq!(f.lut.grid.base, fit_table.lut.grid.base);
-    assert_eq!(f.lut.edge_band, fit_table.lut.edge_band);
-    assert_eq!(f.lut.solver, edge_band_solver_description(&f.lut.grid));
     assert_eq!(
         f.lut.contact_radius_error,
         fit_table.lut.contact_radius_error
     );
-    // no sample node is one of the fit's interior nodes
     for e in &f.lut.grid.modulus_kpa[1..f.lut.grid.modulus_kpa.len() - 1] {
         assert!(!fit_table.lut.grid.modulus_kpa.contains(e), "{e}");
     }
+}
+
+/// The simulated bench's sample table (`sim-samples.lut`) is the `sim-samples` grid solved
+/// one refinement finer than the fit's table (`tactile lut build --grid sim-samples
+/// --edge-band --finer`): the finer band and its current solver description, so that a
+/// simulated sample shares neither the fit table's nodes nor its discretisation.
+#[test]
+fn the_sim_samples_table_is_one_refinement_finer_between_the_fit_tables_moduli() {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data/sim-samples.lut");
+    let f = read_lut(&path).unwrap();
+    assert_between_the_fit_tables_moduli(&f);
+    assert_eq!(f.lut.edge_band, Some(fem_core::edge_band::EdgeBand::FINER));
+    assert_eq!(
+        f.lut.solver,
+        band_solver_description(&f.lut.grid, TableSolve::FinerEdgeBand)
+    );
+    assert_ne!(f.lut.solver, edge_band_solver_description(&f.lut.grid));
+}
+
+/// The same grid at the fit table's own settings (`sim-samples-converged.lut`), which
+/// measures the fit table's interpolation at its own spacing: the converged band and its
+/// current solver description.
+#[test]
+fn the_converged_sim_samples_table_has_the_fit_tables_settings() {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data/sim-samples-converged.lut");
+    let f = read_lut(&path).unwrap();
+    assert_between_the_fit_tables_moduli(&f);
+    assert_eq!(f.lut.edge_band, converged().lut.edge_band);
+    assert_eq!(f.lut.solver, edge_band_solver_description(&f.lut.grid));
 }
 
 #[test]
@@ -299,6 +321,7 @@ fn headers_state_the_interpolation_error_their_curves_give() {
         "default-production-mesh.lut",
         "default.lut",
         "sim-samples.lut",
+        "sim-samples-converged.lut",
         "effects-thickness.lut",
         "effects-friction.lut",
         "effects-stiffening.lut",

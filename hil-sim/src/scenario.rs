@@ -101,9 +101,10 @@ fn default_max_depth() -> f64 {
     2.0
 }
 
-/// The sample's mechanics default to the shipped simulation table (`sim-samples.lut`: the
-/// converged settings of the host's `default.lut` on the moduli midway between its nodes),
-/// so that a simulated sample is not read from the nodes the fit reads.
+/// The sample's mechanics default to the shipped simulation table (`sim-samples.lut`:
+/// solves one refinement finer than the host's `default.lut`, on the moduli midway between
+/// its nodes), so that a simulated sample shares neither the nodes nor the discretisation
+/// the fit reads.
 impl Default for MechanicsSource {
     fn default() -> Self {
         Self::Lut {

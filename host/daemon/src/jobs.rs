@@ -167,8 +167,8 @@ pub fn calibrate_sim(
 }
 
 /// The daemon's default simulated bench: the paper's gelatin (200 kPa) with the mechanics
-/// read from `lut` (normally [`super::sim::sim_lut`]: the fit table's converged settings
-/// between its moduli).
+/// read from `lut` (normally [`super::sim::sim_lut`]: one refinement finer than the fit's
+/// table, between its moduli).
 #[cfg(feature = "sim")]
 pub fn default_sim_scenario(lut: &Path) -> hil_sim::scenario::Scenario {
     hil_sim::scenario::Scenario {

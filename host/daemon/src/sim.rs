@@ -19,9 +19,10 @@ pub fn shipped_lut() -> PathBuf {
     fem_core::shipped::default_lut_path()
 }
 
-/// The table the simulated bench's sample is made of: `fem-core/data/sim-samples.lut`, the
-/// fit table's converged settings on the moduli midway between its nodes, so that a `--sim`
-/// run's sample is not read from the nodes the fit reads.
+/// The table the simulated bench's sample is made of: `fem-core/data/sim-samples.lut`,
+/// solved one refinement finer than the fit's table on the moduli midway between its
+/// nodes, so that a `--sim` run's sample shares neither the nodes nor the discretisation
+/// the fit reads.
 pub fn sim_lut() -> PathBuf {
     fem_core::shipped::sim_samples_lut_path()
 }

@@ -40,7 +40,7 @@ pub struct DaemonArgs {
     token_file: Option<PathBuf>,
     /// Lookup table for the fit (default: the shipped converged table,
     /// fem-core/data/default.lut, with --sim too; the simulated sample is made of
-    /// fem-core/data/sim-samples.lut, the same settings midway between its moduli).
+    /// fem-core/data/sim-samples.lut, solved one refinement finer midway between its moduli).
     #[arg(long)]
     lut: Option<PathBuf>,
     /// The setup's model file (`tactile diagnose --apply`): every experiment's fit uses the

@@ -38,7 +38,8 @@ pub enum GridName {
     /// E2 10–1468 kPa (14 log-spaced), p_air 0, 6, 10, 15, 20, 30 kPa, production mesh (with --edge-band: the shipped default.lut).
     Default,
     /// The default grid's end moduli and the midpoints between its moduli (15) at its
-    /// pressures: the simulated bench's samples (with --edge-band: the shipped sim-samples.lut).
+    /// pressures: the simulated bench's samples (with --edge-band --finer: the shipped
+    /// sim-samples.lut; with --edge-band: sim-samples-converged.lut).
     SimSamples,
     /// 3 x 2 curves on a coarse mesh: a smoke test of the pipeline, not for fitting.
     Tiny,
