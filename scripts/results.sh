@@ -13,6 +13,9 @@
 # exits non-zero. Timings in the blocks depend on the machine and its load: compare ratios.
 set -uo pipefail
 cd "$(dirname "$0")/.."
+# A `should_panic` test prints the panic it expects: without a backtrace that is its
+# "thread ... panicked at" line and the message after it, both dropped below.
+export RUST_BACKTRACE=0
 
 page=docs/results.md
 
@@ -77,7 +80,7 @@ for w in "${wanted[@]}"; do
 done
 
 # Lines that are cargo's or the test harness's, not a measurement.
-noise='^(running [0-9]+ tests?|test result:|test [^ ]+ \.\.\. |[.]+$|[.]*(ok|ignored)$|successes:|failures:|---- |$|[[:space:]]+(Compiling|Finished|Running|Doc-tests|Blocking|Downloaded|Updating)|warning:|note: |test .* has been running for over)'
+noise='^(running [0-9]+ tests?|test result:|test [^ ]+ \.\.\. |[.]+$|[.]*(ok|ignored)$|successes:|failures:|---- |$|[[:space:]]+(Compiling|Finished|Running|Doc-tests|Blocking|Downloaded|Updating)|warning:|note: |test .* has been running for over|all doctests ran in )'
 
 failed=()
 for s in "${sections[@]}"; do
@@ -101,7 +104,9 @@ for s in "${sections[@]}"; do
             echo '```text'
             # -q prints a dot per passed test, glued to the next printed line.
             keep=$(keep_of "$s")
-            sed -E 's/^\.+//' "$out" | grep -Ev "$noise" | grep -E "${keep:-.}" |
+            sed -E 's/^\.+//' "$out" |
+                awk 'expected { expected = 0; next } /^thread .* panicked at / { expected = 1; next } { print }' |
+                grep -Ev "$noise" | grep -E "${keep:-.}" |
                 sed -E 's/[[:space:]]+$//'
             echo '```'
         } >"$body"
