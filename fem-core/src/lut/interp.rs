@@ -188,9 +188,10 @@ impl Lut {
 /// fades out of the interpolation across E2 (mm). Chosen by cross-validation on converged
 /// solves at the geometric midpoints between `default.lut`'s moduli, at every inflated
 /// pressure up to u_s = 1.7 mm (`sim-samples-converged.lut`): chosen on every other
-/// midpoint and scored on the rest, both halves pick 0.4-0.6 mm, and 0.5 mm brings the
-/// largest error per pressure from 2.5-12.3 um (continuation everywhere) to 1.9-2.8 um,
-/// the RMS from 0.7-1.9 um to 0.6-0.8 um. A continuation dropped at once (0 mm) is worse
+/// midpoint and scored on the rest, both halves pick 0.4-0.6 mm, and on the held-out
+/// midpoints 0.5 mm brings the largest error per pressure from 2.5-12.3 um (continuation
+/// everywhere) to 1.9-2.8 um, the RMS from 0.7-1.9 um to 0.6-0.8 um (over all midpoints:
+/// largest 2.2-2.8 um, docs/results.md). A continuation dropped at once (0 mm) is worse
 /// in RMS than keeping it (0.8-1.7 um against 0.8-1.4 um over all midpoints).
 pub const EXTENSION_FADE_MM: f64 = 0.5;
 
