@@ -11,6 +11,11 @@
 //! Per pressure: the largest and RMS |a(table) - a(direct)| over the direct curve's load steps with u_s >= 0.2 mm inside the
 //! table's range, and where the largest sits. A table built with the edge band is solved
 //! with it (about 30 s per curve; the plain production mesh takes about 1.5 s).
+//!
+//! `interpolation_error -- TABLE --truth TRUTH.lut` reads the direct curves from a table
+//! built with the same settings at other moduli or pressures (`tactile lut build
+//! --modulus/--pressure`) instead of solving them: every curve of TRUTH, grouped by
+//! pressure.
 
 use fem_core::Simulation;
 use fem_core::lut::{EffectSelection, LutQuery, OutOfRange, read_lut};
@@ -22,9 +27,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .ok_or("usage: interpolation_error TABLE [PRESSURES, e.g. 6,15]")?;
     let file = read_lut(std::path::Path::new(&path))?;
     let lut = &file.lut;
-    let pressures: Vec<f64> = match args.next() {
-        Some(list) => list.split(',').map(str::parse).collect::<Result<_, _>>()?,
-        None => lut
+    let second = args.next();
+    let truth = match second.as_deref() {
+        Some("--truth") => Some(read_lut(std::path::Path::new(
+            &args.next().ok_or("--truth needs a table file")?,
+        ))?),
+        _ => None,
+    };
+    let pressures: Vec<f64> = match (&truth, second) {
+        (Some(t), _) => t.lut.grid.pressure_kpa.clone(),
+        (None, Some(list)) => list.split(',').map(str::parse).collect::<Result<_, _>>()?,
+        (None, None) => lut
             .grid
             .pressure_kpa
             .iter()
@@ -44,10 +57,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // at the moduli between the nodes, or at the nodes themselves (only the pressure
     // interpolated: the error of interpolating across p_air alone)
     let at_nodes = args.next().as_deref() == Some("nodes");
-    let moduli: Vec<f64> = if at_nodes {
-        m.clone()
-    } else {
-        m.windows(2).map(|w| (w[0] * w[1]).sqrt()).collect()
+    let moduli: Vec<f64> = match &truth {
+        Some(t) => t.lut.grid.modulus_kpa.clone(),
+        None if at_nodes => m.clone(),
+        None => m.windows(2).map(|w| (w[0] * w[1]).sqrt()).collect(),
+    };
+    let what = match &truth {
+        Some(_) => "truth table's moduli".to_string(),
+        None if at_nodes => "modulus nodes".to_string(),
+        None => "midpoints".to_string(),
     };
     for p in pressures {
         let (mut max_um, mut sum_sq, mut n, mut worst) = (0.0f64, 0.0, 0usize, (0.0, 0.0));
@@ -60,20 +78,50 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             } else {
                 Simulation::new(&params)
             };
-            let curve = simulation.solve()?.curve;
-            for pt in curve.points.iter().filter(|pt| pt.u_s_mm >= 0.2) {
+            let points: Vec<(f64, f64)> = match &truth {
+                Some(t) => {
+                    let g = &t.lut.grid;
+                    let (jp, je) = (
+                        g.pressure_kpa
+                            .iter()
+                            .position(|&q| q == p)
+                            .ok_or("pressure")?,
+                        g.modulus_kpa
+                            .iter()
+                            .position(|&q| q == e)
+                            .ok_or("modulus")?,
+                    );
+                    match t.lut.curve(jp * g.modulus_kpa.len() + je) {
+                        Some(c) if c.failure.is_none() => c
+                            .u_s_mm
+                            .iter()
+                            .copied()
+                            .zip(c.a_mm.iter().copied())
+                            .collect(),
+                        _ => continue,
+                    }
+                }
+                None => simulation
+                    .solve()?
+                    .curve
+                    .points
+                    .iter()
+                    .map(|pt| (pt.u_s_mm, pt.a_mm))
+                    .collect(),
+            };
+            for (u_s_mm, a_mm) in points.into_iter().filter(|&(u, _)| u >= 0.2) {
                 let q = LutQuery {
                     modulus_kpa: e,
                     pressure_kpa: p,
-                    u_s_mm: pt.u_s_mm,
+                    u_s_mm,
                 };
                 let Ok(s) = slice.sample(&q, OutOfRange::Error) else {
                     continue;
                 };
-                let d_um = 1e3 * (s.a_mm - pt.a_mm).abs();
+                let d_um = 1e3 * (s.a_mm - a_mm).abs();
                 if d_um > max_um {
                     max_um = d_um;
-                    worst = (e, pt.u_s_mm);
+                    worst = (e, u_s_mm);
                 }
                 sum_sq += d_um * d_um;
                 n += 1;
@@ -82,11 +130,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         println!(
             "p_air {p:>4} kPa: |a(table) - a(direct)| at the {} {}: largest {max_um:.2} um (E2 {:.1} kPa, u_s {:.2} mm), RMS {:.2} um over {n} steps",
             moduli.len(),
-            if at_nodes {
-                "modulus nodes"
-            } else {
-                "midpoints"
-            },
+            what,
             worst.0,
             worst.1,
             (sum_sq / n.max(1) as f64).sqrt()

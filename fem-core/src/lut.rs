@@ -16,6 +16,7 @@ pub mod grid;
 pub mod interp;
 pub mod interpolation_error;
 pub mod pchip;
+pub mod pressure_weights;
 pub mod table;
 
 pub use build::{

@@ -446,3 +446,93 @@ fn truncated_curves_are_recorded_and_limit_the_queryable_range() {
     let (_, hi_at_3) = slice.u_s_range_mm(500.0, 3.0).unwrap();
     assert!((hi_at_3 - last_u).abs() < 1e-12, "{hi_at_3} vs {last_u}");
 }
+
+/// Across p_air the table reads a cubic (node slopes from parabolas through three inflated
+/// nodes), exact for the stand-in's a linear in p_air. In the stand-in a higher pressure
+/// gives more u_s, so the lower outer node's curve ends first (at 100 kPa, 10 kPa: u_s
+/// 0.55 mm, below the bracket 15-20 kPa's 0.575 mm): beyond it that node is continued
+/// linearly and fades, and the read stays continuous there.
+#[test]
+fn across_p_air_a_cubic_continuous_where_an_outer_pressure_curve_ends() {
+    let lut = table(6);
+    let slice = lut.slice(&EffectSelection::default()).unwrap();
+    let at = |p: f64, u: f64| {
+        slice
+            .sample(
+                &LutQuery {
+                    modulus_kpa: 100.0,
+                    pressure_kpa: p,
+                    u_s_mm: u,
+                },
+                OutOfRange::Error,
+            )
+            .unwrap()
+            .a_mm
+    };
+    let end = 0.5 * (1.0 + 10.0 / 100.0);
+    let (l, r) = (at(17.5, end - 1e-9), at(17.5, end + 1e-9));
+    assert!((l - r).abs() < 1e-8, "jump {} at u_s = {end}", l - r);
+    for p in [15.5, 17.5, 19.0] {
+        for u in [0.1, 0.3, 0.5, end] {
+            // only the 40-step PCHIP along u_s differs from the closed form (as on a node)
+            let exact = standin_a_mm(100.0, p, u);
+            assert!((at(p, u) / exact - 1.0).abs() < 1e-5, "{p} kPa, u_s {u}");
+        }
+        // beyond the outer node's end its linear continuation takes part, faded: still
+        // within 1e-4 of the closed form 0.02 mm further
+        let u = end + 0.02;
+        let exact = standin_a_mm(100.0, p, u);
+        assert!((at(p, u) / exact - 1.0).abs() < 1e-4, "{p} kPa, u_s {u}");
+    }
+}
+
+/// The deflated node never enters a cubic: with a stand-in whose 0 kPa curves are off by
+/// half, reads between the first two inflated nodes still follow the inflated nodes (the
+/// cubic through 6, 10 and 15 kPa is exact for the stand-in's a linear in p_air), while
+/// reads between 0 and 6 kPa are the straight line to the deflated node.
+#[test]
+fn the_deflated_node_stays_out_of_the_cubic() {
+    let base = CurveParams {
+        steps: 40,
+        ..CurveParams::default()
+    };
+    let g = LutGrid::with_axes(
+        "interp-test",
+        base,
+        log_spaced(10.0, 1000.0, 13),
+        vec![0.0, 6.0, 10.0, 15.0, 20.0, 30.0],
+    );
+    let off_when_deflated = |p: &CurveParams| -> Result<fem_core::Curve, String> {
+        let mut c = standin_solver(p)?;
+        if p.pressure_kpa == 0.0 {
+            for q in &mut c.points {
+                q.a_mm *= 1.5;
+            }
+        }
+        Ok(c)
+    };
+    let lut = build_lut(&g, None, &off_when_deflated, STANDIN, &|_| {}).unwrap();
+    let slice = lut.slice(&EffectSelection::default()).unwrap();
+    let at = |p: f64, u: f64| {
+        slice
+            .sample(
+                &LutQuery {
+                    modulus_kpa: 100.0,
+                    pressure_kpa: p,
+                    u_s_mm: u,
+                },
+                OutOfRange::Error,
+            )
+            .unwrap()
+            .a_mm
+    };
+    let u = 0.2;
+    for p in [6.5, 8.0, 9.5] {
+        let exact = standin_a_mm(100.0, p, u);
+        assert!((at(p, u) / exact - 1.0).abs() < 1e-5, "{p} kPa");
+    }
+    let (a0, a6) = (at(0.0, u), at(6.0, u));
+    assert!((a0 / standin_a_mm(100.0, 0.0, u) - 1.5).abs() < 1e-5);
+    let line = a0 + (a6 - a0) * 3.0 / 6.0;
+    assert!((at(3.0, u) - line).abs() < 1e-12);
+}

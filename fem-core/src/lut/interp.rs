@@ -16,7 +16,15 @@
 //!    the curve's end to 0 that far beyond. The result stays continuous in u_s and C1 in
 //!    ln E2 (a fit over E2 is smooth); d a / d ln E2 is the blend of the cubics'
 //!    derivatives.
-//! 3. Across p_air, linear between the bracketing pressure nodes.
+//! 3. Across p_air, before the interpolation across E2: each modulus node's curves at the
+//!    pressure nodes are combined at the queried pressure with the weights of a C1 cubic
+//!    Hermite in p_air ([`pressure_weights`]: node slopes from the parabola through three
+//!    inflated nodes; a straight line between the deflated node and the first inflated
+//!    one). The bracketing pressure nodes' curves must reach the queried u_s; an outer
+//!    pressure node whose curve does not is continued linearly and fades out over
+//!    [`EXTENSION_FADE_MM`] like an outer modulus node. Combining before the PCHIP in
+//!    ln E2 keeps each modulus node's value independent of the interval read, so the result
+//!    stays C1 in ln E2; at a pressure node it is that node's slice, bit for bit.
 //!
 //! The u_s range that can be queried at a given E2 is that of the softer bracketing curve
 //! (soft samples take most of the travel, so their u_s range is small). Outside the table a
@@ -26,6 +34,7 @@
 use super::error::LutError;
 use super::grid::EffectSelection;
 use super::pchip;
+use super::pressure_weights;
 use super::table::Lut;
 
 /// What to do with a query outside the table.
@@ -203,6 +212,86 @@ fn extension_weight(c: &PreparedCurve, u: f64) -> f64 {
     (1.0 - beyond / EXTENSION_FADE_MM).clamp(0.0, 1.0)
 }
 
+/// Which pressure nodes a read at p_air uses: the bracketing pair (those of non-zero
+/// weight, whose curves must reach the queried u_s) and the outer neighbours that may
+/// enter the cubic across p_air ([`pressure_weights`]).
+#[derive(Debug, Clone)]
+struct PressureStencil {
+    /// Lower bracketing node and the query's pressure.
+    k: usize,
+    p: f64,
+    /// The bracketing nodes of non-zero weight (one at a node).
+    bracketing: Vec<usize>,
+    /// Outer nodes k - 1 and k + 2, where they exist and are inflated (p_air > 0) and the
+    /// bracket is inflated too.
+    below: Option<usize>,
+    above: Option<usize>,
+}
+
+impl PressureStencil {
+    fn new(pressures: &[f64], p: f64, k: usize) -> Self {
+        if pressures.len() == 1 {
+            return Self {
+                k: 0,
+                p,
+                bracketing: vec![0],
+                below: None,
+                above: None,
+            };
+        }
+        let w = (p - pressures[k]) / (pressures[k + 1] - pressures[k]);
+        let bracketing = [(k, 1.0 - w), (k + 1, w)]
+            .into_iter()
+            .filter(|&(_, w)| w != 0.0)
+            .map(|(j, _)| j)
+            .collect::<Vec<_>>();
+        let off_node = bracketing.len() == 2;
+        let inflated = pressures[k] > 0.0;
+        Self {
+            k,
+            p,
+            bracketing,
+            below: (off_node && inflated && k >= 1 && pressures[k - 1] > 0.0).then(|| k - 1),
+            above: (off_node && inflated && k + 2 < pressures.len()).then_some(k + 2),
+        }
+    }
+
+    /// The pressure nodes' weights, given how much each outer node's curve covers the
+    /// queried u_s (`None`: no such node or an unusable curve; else [`extension_weight`]):
+    /// the cubics with and without each outer node blended like the stencils across E2.
+    fn weights(
+        &self,
+        pressures: &[f64],
+        below: Option<f64>,
+        above: Option<f64>,
+    ) -> Vec<(usize, f64)> {
+        if self.bracketing.len() == 1 {
+            return vec![(self.bracketing[0], 1.0)];
+        }
+        let options = |w: Option<f64>| match w {
+            None => vec![(false, 1.0)],
+            Some(w) if w >= 1.0 => vec![(true, 1.0)],
+            Some(w) if w <= 0.0 => vec![(false, 1.0)],
+            Some(w) => vec![(true, w), (false, 1.0 - w)],
+        };
+        let mut sum: Vec<(usize, f64)> = Vec::with_capacity(4);
+        for (with_below, wb) in options(below) {
+            for (with_above, wa) in options(above) {
+                let blend = wb * wa;
+                for (j, w) in pressure_weights::hermite_weights(
+                    pressures, self.k, self.p, with_below, with_above,
+                ) {
+                    match sum.iter_mut().find(|(i, _)| *i == j) {
+                        Some((_, s)) => *s += blend * w,
+                        None => sum.push((j, blend * w)),
+                    }
+                }
+            }
+        }
+        sum
+    }
+}
+
 /// Bracketing nodes of `x` on an increasing axis: (i0, i1, weight of i1), after optional
 /// clamping. A single-node axis accepts only its value.
 fn bracket(
@@ -267,13 +356,7 @@ impl LutSlice<'_> {
             other => other,
         })?;
         let pressures = &self.lut.grid.pressure_kpa;
-        // pressure weights: linear between jp and jp+1 (a single node gets weight 1)
-        let nodes: Vec<(usize, f64)> = if pressures.len() == 1 {
-            vec![(0, 1.0)]
-        } else {
-            let w = (p - pressures[jp]) / (pressures[jp + 1] - pressures[jp]);
-            vec![(jp, 1.0 - w), (jp + 1, w)]
-        };
+        let stencil = PressureStencil::new(pressures, p, jp);
         let mut u = q.u_s_mm;
         if !u.is_finite() {
             return Err(LutError::OutOfRange {
@@ -285,10 +368,7 @@ impl LutSlice<'_> {
         }
         // u_s range covered by every bracketing curve
         let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
-        for &(j, w) in &nodes {
-            if w == 0.0 {
-                continue;
-            }
+        for &j in &stencil.bracketing {
             for e in [ke, ke + 1] {
                 let (index, c) = &self.curves[j][e];
                 let c = c.as_ref().map_err(|reason| LutError::CurveUnavailable {
@@ -314,18 +394,7 @@ impl LutSlice<'_> {
                 });
             }
         }
-        let mut out = [0.0; NQ];
-        let mut da = 0.0;
-        for &(j, w) in &nodes {
-            if w == 0.0 {
-                continue;
-            }
-            let (v, d) = self.across_modulus(j, ke, x, u);
-            for i in 0..NQ {
-                out[i] += w * v[i];
-            }
-            da += w * d;
-        }
+        let (out, da) = self.across_modulus(&stencil, ke, x, u);
         Ok(LutSample {
             a_mm: out[0],
             load_n: out[1],
@@ -336,19 +405,79 @@ impl LutSlice<'_> {
         })
     }
 
-    /// PCHIP in ln E2 at pressure node j over the interval [ke, ke+1] (both covering u):
-    /// values of every quantity and d a / d ln E2. Each outer neighbour continued beyond
-    /// its curve takes part with the weight [`extension_weight`]; with two of them the four
-    /// stencils (with both, either, neither) are blended with the products of the weights,
-    /// so that each stencil keeps its nodes and the blend stays continuous in u.
-    fn across_modulus(&self, j: usize, ke: usize, x: f64, u: f64) -> ([f64; NQ], f64) {
-        let row = &self.curves[j];
-        let outer_weight = |e: Option<usize>| match e.and_then(|e| row.get(e)) {
-            Some((_, Ok(c))) => Some(extension_weight(c, u)),
+    /// The curve of modulus node `e` read at the stencil's pressure and at `u`: the
+    /// pressure nodes' curves combined with [`PressureStencil::weights`] (an outer pressure
+    /// node's curve continued linearly beyond its u_s range while its weight fades), and
+    /// the u_s range the bracketing pressure nodes' curves share. With `extend`, every
+    /// curve is continued linearly beyond its range (an outer node across E2). `None` if a
+    /// bracketing pressure node's curve is unusable.
+    fn at_pressure(
+        &self,
+        stencil: &PressureStencil,
+        e: usize,
+        u: f64,
+        extend: bool,
+    ) -> Option<([f64; NQ], (f64, f64))> {
+        let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
+        for &j in &stencil.bracketing {
+            let (a, b) = self.curves[j][e].1.as_ref().ok()?.range();
+            lo = lo.max(a);
+            hi = hi.min(b);
+        }
+        let coverage = |j: Option<usize>| match j.map(|j| &self.curves[j][e].1) {
+            Some(Ok(c)) => Some(extension_weight(c, u)),
             _ => None,
         };
-        let below = outer_weight(ke.checked_sub(1));
-        let above = outer_weight(Some(ke + 2));
+        let weights = stencil.weights(
+            &self.lut.grid.pressure_kpa,
+            coverage(stencil.below),
+            coverage(stencil.above),
+        );
+        let mut out = [0.0; NQ];
+        for (j, w) in weights {
+            let c = self.curves[j][e].1.as_ref().ok()?;
+            let v = if extend || !stencil.bracketing.contains(&j) {
+                c.at_extended(u)
+            } else {
+                c.at(u)
+            };
+            for i in 0..NQ {
+                out[i] += w * v[i];
+            }
+        }
+        Some((out, (lo, hi)))
+    }
+
+    /// PCHIP in ln E2 over the interval [ke, ke+1] (both covering u) of the modulus nodes'
+    /// curves read at the stencil's pressure: values of every quantity and d a / d ln E2.
+    /// Each outer neighbour continued beyond its curve takes part with the weight
+    /// [`extension_weight`]; with two of them the four stencils (with both, either,
+    /// neither) are blended with the products of the weights, so that each stencil keeps
+    /// its nodes and the blend stays continuous in u.
+    fn across_modulus(
+        &self,
+        stencil: &PressureStencil,
+        ke: usize,
+        x: f64,
+        u: f64,
+    ) -> ([f64; NQ], f64) {
+        let n = self.ln_modulus.len();
+        // values at ke - 1, ke, ke + 1, ke + 2 (None: outside the grid or unusable)
+        let mut vals: [Option<[f64; NQ]>; 4] = [None; 4];
+        let mut outer: [Option<f64>; 2] = [None; 2];
+        for (slot, e) in (0..4).map(|s| (s, (ke + s).checked_sub(1))) {
+            let Some(e) = e.filter(|&e| e < n) else {
+                continue;
+            };
+            let bracketing = slot == 1 || slot == 2;
+            if let Some((v, (lo, hi))) = self.at_pressure(stencil, e, u, !bracketing) {
+                vals[slot] = Some(v);
+                if !bracketing {
+                    let beyond = (lo - u).max(u - hi).max(0.0);
+                    outer[slot / 3] = Some((1.0 - beyond / EXTENSION_FADE_MM).clamp(0.0, 1.0));
+                }
+            }
+        }
         let mut out = [0.0; NQ];
         let mut da = 0.0;
         let options = |w: Option<f64>| match w {
@@ -357,9 +486,9 @@ impl LutSlice<'_> {
             Some(w) if w <= 0.0 => vec![(false, 1.0)],
             Some(w) => vec![(true, w), (false, 1.0 - w)],
         };
-        for (with_below, wb) in options(below) {
-            for (with_above, wa) in options(above) {
-                let (v, d) = self.stencil(j, ke, x, u, with_below, with_above);
+        for (with_below, wb) in options(outer[0]) {
+            for (with_above, wa) in options(outer[1]) {
+                let (v, d) = self.stencil(&vals, ke, x, with_below, with_above);
                 let w = wb * wa;
                 for i in 0..NQ {
                     out[i] += w * v[i];
@@ -371,31 +500,25 @@ impl LutSlice<'_> {
     }
 
     /// PCHIP in ln E2 through the bracketing nodes ke, ke+1 and, if asked, the outer
-    /// neighbours ke-1 and ke+2 (continued linearly beyond their curves' u_s range).
+    /// neighbours ke-1 and ke+2 (`vals` in that order).
     fn stencil(
         &self,
-        j: usize,
+        vals: &[Option<[f64; NQ]>; 4],
         ke: usize,
         x: f64,
-        u: f64,
         with_below: bool,
         with_above: bool,
     ) -> ([f64; NQ], f64) {
-        let row = &self.curves[j];
-        let first = if with_below { ke - 1 } else { ke };
-        let last = if with_above { ke + 2 } else { ke + 1 };
-        let xs = &self.ln_modulus[first..=last];
-        let vals: Vec<[f64; NQ]> = (first..=last)
-            .map(|e| match &row[e].1 {
-                Ok(c) if e == ke || e == ke + 1 => c.at(u),
-                Ok(c) => c.at_extended(u),
-                Err(_) => [f64::NAN; NQ], // unreachable: checked by the caller
-            })
-            .collect();
+        let first = if with_below { 0 } else { 1 };
+        let last = if with_above { 3 } else { 2 };
+        let xs = &self.ln_modulus[ke + first - 1..=ke + last - 1];
         let mut out = [0.0; NQ];
         let mut da = 0.0;
         for i in 0..NQ {
-            let ys: Vec<f64> = vals.iter().map(|v| v[i]).collect();
+            // unreachable NaN: the caller includes only the nodes it has values for
+            let ys: Vec<f64> = (first..=last)
+                .map(|s| vals[s].map_or(f64::NAN, |v| v[i]))
+                .collect();
             let (y, d) = pchip::eval(xs, &ys, x);
             out[i] = y;
             if i == 0 {
@@ -426,19 +549,9 @@ impl LutSlice<'_> {
             OutOfRange::Error,
             &mut clamped,
         )?;
-        // the pressure nodes `sample` reads (a node of weight 0, at a query on the other
-        // node, does not limit the range)
-        let pressures = &self.lut.grid.pressure_kpa;
-        let js: Vec<usize> = if pressures.len() == 1 {
-            vec![0]
-        } else {
-            let w = (p - pressures[jp]) / (pressures[jp + 1] - pressures[jp]);
-            [(jp, 1.0 - w), (jp + 1, w)]
-                .into_iter()
-                .filter(|&(_, w)| w != 0.0)
-                .map(|(j, _)| j)
-                .collect()
-        };
+        // the pressure nodes `sample` requires (a node of weight 0, at a query on the other
+        // node, does not limit the range; nor do the outer nodes, which fade out)
+        let js = PressureStencil::new(&self.lut.grid.pressure_kpa, p, jp).bracketing;
         let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
         for j in js {
             for e in [ke, ke + 1] {

@@ -240,18 +240,19 @@ impl<'a> LutModel<'a> {
         Ok(s)
     }
 
-    /// The estimated error of the table's straight line in p_air at (E2, p_air, u_s) as
+    /// The estimated error of the table's interpolation across p_air at (E2, p_air, u_s) as
     /// the instrument reads it (mm of a), `None` at a pressure node, outside the inflated
-    /// nodes, or where fewer than three inflated nodes answer.
+    /// nodes, or where fewer than four inflated nodes answer.
     ///
-    /// Between inflated nodes p_k < p < p_(k+1) the straight line's error is
-    /// (1/2) a''(xi) (p - p_k)(p - p_(k+1)). With a third inflated node q beside the
-    /// bracket, the parabola through the three minus the line is
-    /// `a[p_k, p_(k+1), q] (p - p_k)(p - p_(k+1))` (the second divided difference estimates
-    /// a''/2). Of the two possible third nodes the one giving the larger change is taken (a
-    /// conservative estimate); the deflated node is never used, the shell's response bends
-    /// there (see [`Self::check_pressure`]).
-    pub fn pressure_curvature_mm(
+    /// Between inflated nodes the table reads a C1 cubic Hermite whose node slopes come
+    /// from parabolas through three nodes (fem-core `lut::pressure_weights`): exact for
+    /// parabolas, its leading error is the cubic part of a(p_air). The cubic through four
+    /// inflated nodes around the bracket (Lagrange form; centred where the nodes allow,
+    /// else shifted to the side that has them) holds that part, so its difference from the
+    /// table's read estimates the error to leading order (for a cubic a(p_air) it is the
+    /// error exactly). The deflated node is never used: the shell's response bends there
+    /// (see [`Self::check_pressure`]).
+    pub fn pressure_interpolation_error_mm(
         &self,
         modulus_kpa: f64,
         p_air_kpa: f64,
@@ -271,24 +272,21 @@ impl<'a> LutModel<'a> {
             .filter(|&q| q > 0.0)
             .collect();
         let k = inflated.iter().position(|&q| q > p)?.checked_sub(1)?;
-        let (p0, p1) = (inflated[k], inflated[k + 1]);
-        if p - p0 < 1e-9 || p1 - p < 1e-9 {
+        if p - inflated[k] < 1e-9 || inflated[k + 1] - p < 1e-9 {
             return None;
         }
         let a = |q: f64| self.read(modulus_kpa, q, u).ok().map(|s| s.a_mm);
-        let (a0, a1) = (a(p0)?, a(p1)?);
-        let slope = (a1 - a0) / (p1 - p0);
-        let thirds = [k.checked_sub(1), Some(k + 2)];
-        let change = thirds
+        let read = a(p)?;
+        let cubic = [k.checked_sub(1), Some(k), k.checked_sub(2)]
             .into_iter()
             .flatten()
-            .filter_map(|j| {
-                let q = *inflated.get(j)?;
-                let divided = ((a(q)? - a0) / (q - p0) - slope) / (q - p1);
-                Some(divided * (p - p0) * (p - p1))
-            })
-            .max_by(|x, y| x.abs().total_cmp(&y.abs()))?;
-        Some((1.0 + aug.radius_scale) * change)
+            .filter(|&first| first + 3 < inflated.len())
+            .find_map(|first| {
+                let xs = &inflated[first..first + 4];
+                let ys: Vec<f64> = xs.iter().map(|&q| a(q)).collect::<Option<_>>()?;
+                Some(lagrange(xs, &ys, p))
+            })?;
+        Some((1.0 + aug.radius_scale) * (cubic - read))
     }
 
     /// The u_s range answerable at (E2, p_air) without clamping (as read by the
@@ -327,4 +325,21 @@ impl<'a> LutModel<'a> {
         }
         Ok((a, b))
     }
+}
+
+/// The polynomial through (xs, ys) at x, in Lagrange form.
+fn lagrange(xs: &[f64], ys: &[f64], x: f64) -> f64 {
+    xs.iter()
+        .zip(ys)
+        .enumerate()
+        .map(|(i, (&xi, &yi))| {
+            let basis: f64 = xs
+                .iter()
+                .enumerate()
+                .filter(|&(j, _)| j != i)
+                .map(|(_, &xj)| (x - xj) / (xi - xj))
+                .product();
+            yi * basis
+        })
+        .sum()
 }

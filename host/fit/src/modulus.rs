@@ -628,8 +628,8 @@ fn lag1_correlation(points: &[FitPoint], used: &[usize], residuals: &[f64]) -> f
     (cov / var).clamp(-0.99, 0.99)
 }
 
-/// The table's straight line in p_air carried into ln E2: each used point's estimated
-/// error of that line, delta_i ([`LutModel::pressure_curvature_mm`], 0 at a pressure node),
+/// The table's interpolation across p_air carried into ln E2: each used point's estimated
+/// error of it, delta_i ([`LutModel::pressure_interpolation_error_mm`], 0 at a pressure node),
 /// projected on the fit's sensitivity s_i = d a / d ln E2 at the estimate,
 /// `|sum s_i delta_i| / sum s_i^2` (to first order, the shift of a least-squares fit of
 /// ln E2 when every a_i moves by delta_i).
@@ -646,7 +646,9 @@ fn pressure_interpolation_ln(
         };
         let slope = s.da_dln_modulus_mm;
         den += slope * slope;
-        if let Some(delta) = model.pressure_curvature_mm(modulus_kpa, p.p_air_kpa, p.u_s_mm) {
+        if let Some(delta) =
+            model.pressure_interpolation_error_mm(modulus_kpa, p.p_air_kpa, p.u_s_mm)
+        {
             num += slope * delta;
         }
     }
