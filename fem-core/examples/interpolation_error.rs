@@ -7,7 +7,7 @@
 //! `cargo run --release -p fem-core --example interpolation_error -- TABLE [PRESSURES]
 //! [nodes]` (default pressures: the table's, without 0). With `nodes` the curves are
 //! solved at the table's modulus nodes instead, so that at pressures between the table's
-//! pressure nodes only the interpolation across p_air differs (linear between them).
+//! pressure nodes only the interpolation across p_air differs (`lut::pressure_weights`).
 //! Per pressure: the largest and RMS |a(table) - a(direct)| over the direct curve's load steps with u_s >= 0.2 mm inside the
 //! table's range, and where the largest sits. A table built with the edge band is solved
 //! with it (about 30 s per curve; the plain production mesh takes about 1.5 s).

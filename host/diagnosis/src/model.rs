@@ -1,5 +1,5 @@
 //! The forward model the diagnosis fits: the baseline table a(E2, p_air, u_s) (PCHIP in
-//! u_s and ln E2, linear in p_air: fem-core's interpolation), continued linearly in p_air
+//! u_s and ln E2, a C1 cubic in p_air: fem-core's interpolation), continued linearly in p_air
 //! beyond the table's pressures (for the pressure-offset candidate), plus the effect tables'
 //! slices along their effect axes.
 
@@ -144,11 +144,12 @@ impl<'a> Surface<'a> {
     /// The model at (E2, p_air, u_s). Below the first inflated pressure node, through the
     /// pressure reference where there is one and it covers both p_air and the nearest node
     /// (the node's value plus the reference's change); elsewhere from this surface's own
-    /// table, linear in p_air between its nodes, and outside its pressures continued
-    /// linearly from the two nearest nodes. Between inflated nodes the reference is not
-    /// used: its mesh's contact radius moves in steps along u_s, so its change between two
-    /// pressures wiggles (on mesh level -2 by 4-5 um RMS against converged solves at 8, 13
-    /// and 17 kPa, where the converged chord is within 1 um).
+    /// table, read between its nodes by fem-core's cubic in p_air, and outside its pressures
+    /// continued linearly from the two nearest nodes. Between inflated nodes the reference
+    /// is not used: its mesh's contact radius moves in steps along u_s, so its change
+    /// between two pressures wiggles (on mesh level -2 by 4-5 um RMS against converged
+    /// solves at 8, 13 and 17 kPa, where even a straight line between the converged
+    /// table's nodes is within 1 um and its cubic closer still).
     pub fn sample(&self, e: f64, p: f64, u: f64) -> ModelSample {
         if let Some(r) = &self.pressure_reference
             && self.below_first_inflated_node(p)

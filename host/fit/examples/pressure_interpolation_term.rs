@@ -3,9 +3,9 @@
 //! without the edge band, so that each solve is fast; the converged `default.lut` has the
 //! same pressure axis) at its modulus nodes (where interpolation across E2 adds nothing)
 //! and at pressures between its inflated pressure nodes, fitted without noise with that
-//! table. Each estimate's error then comes from the table's straight line
-//! in p_air (and the mesh's wiggles along u_s); the term estimates it from a parabola
-//! through three of the table's inflated nodes (`LutModel::pressure_curvature_mm`).
+//! table. Each estimate's error then comes from the table's cubic in p_air (and the
+//! mesh's wiggles along u_s); the term estimates the cubic's error from the cubic through
+//! four of the table's inflated nodes (`LutModel::pressure_interpolation_error_mm`).
 //!
 //! `cargo run --release -p fit --example pressure_interpolation_term [PRESSURES]`
 //! (default 8,12.5,17.5,25; about 1.5 s per curve). Per case: the estimate's error, the

@@ -1,5 +1,5 @@
 //! The table as a model for the fit: a(E2, p_air, u_s) and P(E2, p_air, u_s) by fem-core's
-//! interpolation (PCHIP along u_s and ln E2, linear in p_air), with d a / d ln E2; and,
+//! interpolation (PCHIP along u_s and ln E2, a C1 cubic in p_air), with d a / d ln E2; and,
 //! for a setup whose diagnosis found effects the table leaves out (`tactile diagnose
 //! --apply`), the table augmented with them ([`Augmentation`]).
 

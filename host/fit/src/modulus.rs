@@ -23,9 +23,10 @@
 //!   with the table interpolated linearly in ln E2 between its nodes, and
 //!   |ln E2(PCHIP) - ln E2(linear)| is taken as the half-width (a conservative bound:
 //!   linear interpolation's error is second order in the node spacing, PCHIP's higher);
-//! - the table's straight line in p_air between pressure nodes, added in quadrature: the
-//!   parabola through the bracketing nodes and a third one estimates that line's error at
-//!   each point, projected on ln E2 (0 when every point lies at a pressure node).
+//! - the table's interpolation across p_air between pressure nodes, added in quadrature:
+//!   the cubic through four inflated nodes estimates the error of the table's cubic at each
+//!   point to leading order, projected on ln E2 (0 when every point lies at a pressure
+//!   node).
 //!
 //! Model error (a wrong friction, thickness, ...) and calibration error are not in the
 //! interval: they are systematic and are what the diagnosis looks for.
@@ -146,7 +147,7 @@ pub struct ModulusFit {
     pub modulus_linear_interpolation_kpa: f64,
     /// Half-width (in ln E2) added in quadrature for the table's interpolation error.
     pub interpolation_half_width_ln: f64,
-    /// Half-width (in ln E2) added in quadrature for the table's straight line in p_air
+    /// Half-width (in ln E2) added in quadrature for the table's interpolation across p_air
     /// between its pressure nodes (0 when every point lies at a node).
     pub pressure_interpolation_half_width_ln: f64,
     /// The model's discretisation term (the estimated bias ln E - ln E(finer mesh)) when a
