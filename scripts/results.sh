@@ -41,7 +41,7 @@ sections=(
     "interpolation-all-pressures@@@@cargo run -q --release -p fem-core --example interpolation_against_table -- fem-core/data/default.lut fem-core/data/sim-samples-converged.lut && cargo run -q --release -p fem-core --example interpolation_against_table -- fem-core/data/default.lut fem-core/data/sim-samples.lut"
     "band-against-finer@@@@scripts/band_against_finer.sh"
     "pressure-interpolation@@^(fem-core|p_air)@@cargo run -q --release -p fem-core --example interpolation_error -- fem-core/data/default-production-mesh.lut 3,8,12.5,17.5,25 nodes"
-    "pressure-interpolation-converged@@^(fem-core|p_air)@@cargo run -q --release -p fem-core --example interpolation_error -- fem-core/data/default.lut 8,12.5,17.5 nodes"
+    "pressure-interpolation-converged@@^(fem-core|p_air)@@mkdir -p target/pressure-truth; for s in mid:8,12.5,17.5,25 quarter:7,9,11.25,13.75,16.25,18.75,22.5,27.5; do t=target/pressure-truth/\${s%%:*}.lut; [ -f \$t ] || cargo run -q --release -p tactile -- lut build --grid default --edge-band --pressure \${s#*:} --out \$t 2>/dev/null; cargo run -q --release -p fem-core --example interpolation_error -- fem-core/data/default.lut --truth \$t; done"
     "pressure-term@@^(the shipped|p_air|summary)@@cargo run -q --release -p fit --example pressure_interpolation_term"
     "snap-through@@^(E2|snap|solve time)@@for e in 681.3 1000; do echo \"E2 = \$e kPa, p_air = 0:\"; RAYON_NUM_THREADS=1 cargo run -q --release -p fem-core --example curve -- \$e 0 0 40 2; done"
     "fem-speed@@^(stage|curve solve)@@RAYON_NUM_THREADS=1 cargo run -q --release -p fem-core --example solver_trace -- 200 6 0"

@@ -21,7 +21,10 @@ use sha2::{Digest, Sha256};
 
 use super::error::LutError;
 use super::grid::{LutGrid, Shard};
-use super::interpolation_error::{ModulusInterpolationError, modulus_leave_one_out};
+use super::interpolation_error::{
+    ModulusInterpolationError, PressureInterpolationError, modulus_leave_one_out,
+    pressure_leave_one_out,
+};
 use super::table::{Lut, LutCurve};
 
 /// First token of every LUT file.
@@ -91,6 +94,14 @@ pub struct LutHeader {
     /// (its merge states it) and in tables written before it was recorded.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub modulus_interpolation: Vec<ModulusInterpolationError>,
+    /// What interpolating across p_air adds to the contact radius: every inflated pressure
+    /// node with inflated nodes on both sides left out and read from the others by the
+    /// table's cubic in p_air, at every modulus node ([`super::interpolation_error`]),
+    /// rounded to nanometres. Derived from the curves when the table is written; absent in
+    /// a shard, in a table with fewer than three inflated pressures and in tables written
+    /// before it was recorded.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub pressure_interpolation: Vec<PressureInterpolationError>,
 }
 
 impl LutHeader {
@@ -154,6 +165,18 @@ impl LutHeader {
                 modulus_leave_one_out(lut)
                     .into_iter()
                     .map(|e| ModulusInterpolationError {
+                        max_um: round_nm(e.max_um),
+                        rms_um: round_nm(e.rms_um),
+                        ..e
+                    })
+                    .collect()
+            },
+            pressure_interpolation: if lut.shard.is_some() {
+                Vec::new()
+            } else {
+                pressure_leave_one_out(lut)
+                    .into_iter()
+                    .map(|e| PressureInterpolationError {
                         max_um: round_nm(e.max_um),
                         rms_um: round_nm(e.rms_um),
                         ..e

@@ -8,9 +8,16 @@
 //! (PCHIP is of order 2-3). A feature narrower than the spacing can escape both, so this is
 //! a screening figure, not a bound. The example `interpolation_error` measures the error at
 //! the table's own spacing against direct solves.
+//!
+//! Across p_air the same is done at every modulus node: each interior inflated pressure node
+//! is left out and read from the other inflated nodes by the table's cubic in p_air
+//! ([`super::pressure_weights`], with the outer nodes that exist), over the u_s every curve
+//! involved reaches. The example `interpolation_error -- TABLE --truth FILE` measures the
+//! error at the table's own spacing against direct solves between the pressure nodes.
 
 use super::grid::GridIndex;
 use super::pchip;
+use super::pressure_weights;
 use super::table::{Lut, LutCurve};
 
 /// Spacing of the u_s points compared (mm).
@@ -145,6 +152,120 @@ pub fn modulus_leave_one_out(lut: &Lut) -> Vec<ModulusInterpolationError> {
     out
 }
 
+/// The leave-one-out interpolation error in a at one left-out pressure node, over every
+/// modulus node and every slice of the effect axes.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct PressureInterpolationError {
+    /// The left-out pressure node (kPa).
+    pub pressure_kpa: f64,
+    /// Largest |prediction - stored a| over the moduli, u_s and slices (µm).
+    pub max_um: f64,
+    /// RMS over the same points (µm).
+    pub rms_um: f64,
+    /// The modulus where the largest difference sits (kPa).
+    pub worst_modulus_kpa: f64,
+    /// Points compared.
+    pub points: usize,
+    /// Slices of the effect axes compared.
+    pub slices: usize,
+}
+
+/// The leave-one-out error across p_air: every inflated pressure node with inflated nodes on
+/// both sides, left out and read from the remaining inflated nodes (the bracketing pair and
+/// the outer neighbours that exist) at every modulus node, at u_s every [`U_S_STEP_MM`]
+/// from [`U_S_MIN_MM`] that each curve involved reaches. The deflated node (p_air = 0) takes
+/// no part, as in the table's own reads. Empty for a table with fewer than three inflated
+/// pressures.
+pub fn pressure_leave_one_out(lut: &Lut) -> Vec<PressureInterpolationError> {
+    let g = &lut.grid;
+    let inflated: Vec<usize> = (0..g.pressure_kpa.len())
+        .filter(|&j| g.pressure_kpa[j] > 0.0)
+        .collect();
+    let e = &g.effects;
+    let mut slices = Vec::new();
+    for stiffening in 0..e.stiffening.len() {
+        for material in 0..e.material.len() {
+            for friction in 0..e.friction.len() {
+                for thickness in 0..e.sample_thickness_mm.len() {
+                    slices.push((stiffening, material, friction, thickness));
+                }
+            }
+        }
+    }
+    let mut out = Vec::new();
+    for left in 1..inflated.len().saturating_sub(1) {
+        // the remaining inflated nodes, as grid indices and pressures
+        let rest: Vec<usize> = inflated
+            .iter()
+            .copied()
+            .filter(|&j| j != inflated[left])
+            .collect();
+        let xs: Vec<f64> = rest.iter().map(|&j| g.pressure_kpa[j]).collect();
+        let p = g.pressure_kpa[inflated[left]];
+        let k = left - 1;
+        let weights = pressure_weights::hermite_weights(&xs, k, p, k >= 1, k + 2 < xs.len());
+        let (mut max_um, mut sum_sq, mut points, mut worst) = (0.0f64, 0.0, 0usize, f64::NAN);
+        let mut slices_compared = 0;
+        for &(stiffening, material, friction, thickness) in &slices {
+            let curve = |jp: usize, m: usize| {
+                lut.curve(g.flat_index(GridIndex {
+                    stiffening,
+                    material,
+                    friction,
+                    thickness,
+                    pressure: jp,
+                    modulus: m,
+                }))
+                .filter(|c| c.failure.is_none() && c.u_s_mm.len() >= 2)
+            };
+            let points_before = points;
+            for m in 0..g.modulus_kpa.len() {
+                let Some(left_out) = curve(inflated[left], m) else {
+                    continue;
+                };
+                let used: Option<Vec<(&LutCurve, f64)>> = weights
+                    .iter()
+                    .map(|&(i, w)| curve(rest[i], m).map(|c| (c, w)))
+                    .collect();
+                let Some(used) = used else { continue };
+                let reach = used
+                    .iter()
+                    .map(|&(c, _)| max_u_s(c))
+                    .fold(max_u_s(left_out), f64::min);
+                let count = ((reach - U_S_MIN_MM) / U_S_STEP_MM + 1e-9).floor();
+                for i in 0..=(count.max(-1.0) as i64) {
+                    let u = U_S_MIN_MM + i as f64 * U_S_STEP_MM;
+                    let pred: Option<f64> =
+                        used.iter().map(|&(c, w)| a_at(c, u).map(|a| w * a)).sum();
+                    if let (Some(pred), Some(truth)) = (pred, a_at(left_out, u)) {
+                        let d_um = 1e3 * (pred - truth).abs();
+                        if d_um > max_um {
+                            max_um = d_um;
+                            worst = g.modulus_kpa[m];
+                        }
+                        sum_sq += d_um * d_um;
+                        points += 1;
+                    }
+                }
+            }
+            if points > points_before {
+                slices_compared += 1;
+            }
+        }
+        if points > 0 {
+            out.push(PressureInterpolationError {
+                pressure_kpa: p,
+                max_um,
+                rms_um: (sum_sq / points as f64).sqrt(),
+                worst_modulus_kpa: worst,
+                points,
+                slices: slices_compared,
+            });
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -246,6 +367,59 @@ mod tests {
         assert!(
             [20.0, 40.0, 80.0].contains(&errors[0].worst_modulus_kpa),
             "{errors:?}"
+        );
+    }
+
+    /// Across p_air: a parabola in p_air is read exactly by the table's cubic (its slopes
+    /// come from parabolas), so leaving a node out costs nothing, whatever the deflated
+    /// node holds (it takes no part: here it is off by a millimetre); a 4 um bump at one
+    /// inflated node shows up with its full size where that node is left out.
+    #[test]
+    fn across_pressure_zero_for_a_parabola_and_the_bump_where_it_is() {
+        let pressures = vec![0.0, 6.0, 10.0, 15.0, 20.0, 30.0];
+        let grid = LutGrid::with_axes(
+            "loo-p",
+            LutGrid::tiny_grid().base,
+            vec![10.0, 100.0],
+            pressures.clone(),
+        );
+        let table = |bump_at: Option<f64>| {
+            let curves = (0..pressures.len() * 2)
+                .map(|index| {
+                    let (jp, m) = (index / 2, index % 2);
+                    let p = pressures[jp];
+                    let mut c = linear_curve(index, grid.modulus_kpa[m], 0.0);
+                    let shift = if p == 0.0 {
+                        1.0
+                    } else {
+                        1e-3 * (p - 0.02 * p * p) + if bump_at == Some(p) { 0.004 } else { 0.0 }
+                    };
+                    c.a_mm.iter_mut().for_each(|a| *a += shift);
+                    c
+                })
+                .collect();
+            Lut {
+                grid: grid.clone(),
+                fem_core_version: Lut::this_fem_core_version(),
+                solver: "synthetic".into(),
+                shard: None,
+                contact_radius_error: None,
+                edge_band: None,
+                curves,
+            }
+        };
+        let clean = pressure_leave_one_out(&table(None));
+        let left_out: Vec<f64> = clean.iter().map(|e| e.pressure_kpa).collect();
+        assert_eq!(left_out, [10.0, 15.0, 20.0]);
+        for e in &clean {
+            assert!(e.max_um < 1e-9, "{e:?}");
+            // 2 moduli x u_s 0.2..2.0 mm every 0.02 mm
+            assert_eq!(e.points, 2 * 91, "{e:?}");
+        }
+        let bumped = pressure_leave_one_out(&table(Some(15.0)));
+        assert!(
+            bumped[1].max_um >= 4.0 - 1e-9 && bumped[1].max_um < 4.0 + 1e-6,
+            "{bumped:?}"
         );
     }
 }

@@ -301,6 +301,8 @@ fn info(a: InfoArgs) -> ExitCode {
             "header": file.header,
             "modulus_interpolation_leave_one_out":
                 fem_core::lut::interpolation_error::modulus_leave_one_out(&file.lut),
+            "pressure_interpolation_leave_one_out":
+                fem_core::lut::interpolation_error::pressure_leave_one_out(&file.lut),
         });
         println!("{v}");
         return ExitCode::SUCCESS;
@@ -376,6 +378,22 @@ fn describe(path: &Path, file: &LutFile) -> String {
         line(format!(
             "E2 interpolation at {} kPa: up to {:.1} um of a, {:.1} um RMS (a node left out \
              and read from its neighbours, at twice the grid spacing; worst at {} kPa{})",
+            e.pressure_kpa,
+            e.max_um,
+            e.rms_um,
+            e.worst_modulus_kpa,
+            if e.slices > 1 {
+                format!("; over {} slices of the effect axes", e.slices)
+            } else {
+                String::new()
+            }
+        ));
+    }
+    for e in fem_core::lut::interpolation_error::pressure_leave_one_out(lut) {
+        line(format!(
+            "p_air interpolation at {} kPa: up to {:.1} um of a, {:.1} um RMS (the node left \
+             out and read from the other inflated pressures, a wider spacing than the \
+             table's; worst at {} kPa{})",
             e.pressure_kpa,
             e.max_um,
             e.rms_um,
