@@ -456,19 +456,7 @@ fn truncated_curves_are_recorded_and_limit_the_queryable_range() {
 fn across_p_air_a_cubic_continuous_where_an_outer_pressure_curve_ends() {
     let lut = table(6);
     let slice = lut.slice(&EffectSelection::default()).unwrap();
-    let at = |p: f64, u: f64| {
-        slice
-            .sample(
-                &LutQuery {
-                    modulus_kpa: 100.0,
-                    pressure_kpa: p,
-                    u_s_mm: u,
-                },
-                OutOfRange::Error,
-            )
-            .unwrap()
-            .a_mm
-    };
+    let at = |p: f64, u: f64| a_at_100_kpa(&slice, p, u);
     let end = 0.5 * (1.0 + 10.0 / 100.0);
     let (l, r) = (at(17.5, end - 1e-9), at(17.5, end + 1e-9));
     assert!((l - r).abs() < 1e-8, "jump {} at u_s = {end}", l - r);
@@ -513,19 +501,7 @@ fn the_deflated_node_stays_out_of_the_cubic() {
     };
     let lut = build_lut(&g, None, &off_when_deflated, STANDIN, &|_| {}).unwrap();
     let slice = lut.slice(&EffectSelection::default()).unwrap();
-    let at = |p: f64, u: f64| {
-        slice
-            .sample(
-                &LutQuery {
-                    modulus_kpa: 100.0,
-                    pressure_kpa: p,
-                    u_s_mm: u,
-                },
-                OutOfRange::Error,
-            )
-            .unwrap()
-            .a_mm
-    };
+    let at = |p: f64, u: f64| a_at_100_kpa(&slice, p, u);
     let u = 0.2;
     for p in [6.5, 8.0, 9.5] {
         let exact = standin_a_mm(100.0, p, u);
@@ -535,4 +511,19 @@ fn the_deflated_node_stays_out_of_the_cubic() {
     assert!((a0 / standin_a_mm(100.0, 0.0, u) - 1.5).abs() < 1e-5);
     let line = a0 + (a6 - a0) * 3.0 / 6.0;
     assert!((at(3.0, u) - line).abs() < 1e-12);
+}
+
+/// a of the table at E2 = 100 kPa (a modulus node), p_air and u_s.
+fn a_at_100_kpa(slice: &fem_core::lut::LutSlice<'_>, p: f64, u: f64) -> f64 {
+    slice
+        .sample(
+            &LutQuery {
+                modulus_kpa: 100.0,
+                pressure_kpa: p,
+                u_s_mm: u,
+            },
+            OutOfRange::Error,
+        )
+        .unwrap()
+        .a_mm
 }

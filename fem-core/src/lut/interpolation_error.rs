@@ -62,13 +62,9 @@ fn max_u_s(curve: &LutCurve) -> f64 {
         .fold(f64::NEG_INFINITY, f64::max)
 }
 
-/// The leave-one-out error across E2 at every pressure, over every slice of the effect axes
-/// (a table that varies an effect: every value of it). Pressures with fewer than three
-/// usable moduli are left out.
-pub fn modulus_leave_one_out(lut: &Lut) -> Vec<ModulusInterpolationError> {
-    let g = &lut.grid;
-    let n = g.modulus_kpa.len();
-    let e = &g.effects;
+/// Every slice of the effect axes: (stiffening, material, friction, thickness) indices.
+fn effect_slices(lut: &Lut) -> Vec<(usize, usize, usize, usize)> {
+    let e = &lut.grid.effects;
     let mut slices = Vec::new();
     for stiffening in 0..e.stiffening.len() {
         for material in 0..e.material.len() {
@@ -79,9 +75,61 @@ pub fn modulus_leave_one_out(lut: &Lut) -> Vec<ModulusInterpolationError> {
             }
         }
     }
+    slices
+}
+
+/// The u_s compared up to `reach`: from [`U_S_MIN_MM`] every [`U_S_STEP_MM`], on a fixed
+/// lattice (a running sum would lose the last point to rounding).
+fn u_s_lattice(reach: f64) -> impl Iterator<Item = f64> {
+    let count = ((reach - U_S_MIN_MM) / U_S_STEP_MM + 1e-9).floor();
+    (0..=(count.max(-1.0) as i64)).map(|i| U_S_MIN_MM + i as f64 * U_S_STEP_MM)
+}
+
+/// Largest and summed squared differences (µm) over the points compared, and where the
+/// largest sits.
+#[derive(Debug, Clone, Copy)]
+struct Tally {
+    max_um: f64,
+    sum_sq: f64,
+    points: usize,
+    worst_modulus_kpa: f64,
+}
+
+impl Tally {
+    fn new() -> Self {
+        Self {
+            max_um: 0.0,
+            sum_sq: 0.0,
+            points: 0,
+            worst_modulus_kpa: f64::NAN,
+        }
+    }
+
+    fn add(&mut self, prediction_mm: f64, stored_mm: f64, modulus_kpa: f64) {
+        let d_um = 1e3 * (prediction_mm - stored_mm).abs();
+        if d_um > self.max_um {
+            self.max_um = d_um;
+            self.worst_modulus_kpa = modulus_kpa;
+        }
+        self.sum_sq += d_um * d_um;
+        self.points += 1;
+    }
+
+    fn rms_um(&self) -> f64 {
+        (self.sum_sq / self.points as f64).sqrt()
+    }
+}
+
+/// The leave-one-out error across E2 at every pressure, over every slice of the effect axes
+/// (a table that varies an effect: every value of it). Pressures with fewer than three
+/// usable moduli are left out.
+pub fn modulus_leave_one_out(lut: &Lut) -> Vec<ModulusInterpolationError> {
+    let g = &lut.grid;
+    let n = g.modulus_kpa.len();
+    let slices = effect_slices(lut);
     let mut out = Vec::new();
     for (jp, &p) in g.pressure_kpa.iter().enumerate() {
-        let (mut max_um, mut sum_sq, mut points, mut worst) = (0.0f64, 0.0, 0usize, f64::NAN);
+        let mut tally = Tally::new();
         let mut slices_compared = 0;
         for &(stiffening, material, friction, thickness) in &slices {
             let curves: Vec<Option<&LutCurve>> = (0..n)
@@ -97,7 +145,7 @@ pub fn modulus_leave_one_out(lut: &Lut) -> Vec<ModulusInterpolationError> {
                     .filter(|c| c.failure.is_none() && c.u_s_mm.len() >= 2)
                 })
                 .collect();
-            let points_before = points;
+            let points_before = tally.points;
             for k in 1..n.saturating_sub(1) {
                 let Some(left_out) = curves[k] else { continue };
                 let neighbours: Vec<usize> =
@@ -114,37 +162,28 @@ pub fn modulus_leave_one_out(lut: &Lut) -> Vec<ModulusInterpolationError> {
                     .filter_map(|&j| curves[j].map(max_u_s))
                     .fold(max_u_s(left_out), f64::min);
                 let xs: Vec<f64> = neighbours.iter().map(|&j| g.modulus_kpa[j].ln()).collect();
-                // u_s on a fixed lattice (a running sum would lose the last point to rounding)
-                let count = ((reach - U_S_MIN_MM) / U_S_STEP_MM + 1e-9).floor();
-                for i in 0..=(count.max(-1.0) as i64) {
-                    let u = U_S_MIN_MM + i as f64 * U_S_STEP_MM;
+                for u in u_s_lattice(reach) {
                     let ys: Option<Vec<f64>> = neighbours
                         .iter()
                         .map(|&j| curves[j].and_then(|c| a_at(c, u)))
                         .collect();
                     if let (Some(ys), Some(truth)) = (ys, a_at(left_out, u)) {
                         let (pred, _) = pchip::eval(&xs, &ys, g.modulus_kpa[k].ln());
-                        let d_um = 1e3 * (pred - truth).abs();
-                        if d_um > max_um {
-                            max_um = d_um;
-                            worst = g.modulus_kpa[k];
-                        }
-                        sum_sq += d_um * d_um;
-                        points += 1;
+                        tally.add(pred, truth, g.modulus_kpa[k]);
                     }
                 }
             }
-            if points > points_before {
+            if tally.points > points_before {
                 slices_compared += 1;
             }
         }
-        if points > 0 {
+        if tally.points > 0 {
             out.push(ModulusInterpolationError {
                 pressure_kpa: p,
-                max_um,
-                rms_um: (sum_sq / points as f64).sqrt(),
-                worst_modulus_kpa: worst,
-                points,
+                max_um: tally.max_um,
+                rms_um: tally.rms_um(),
+                worst_modulus_kpa: tally.worst_modulus_kpa,
+                points: tally.points,
                 slices: slices_compared,
             });
         }
@@ -181,17 +220,7 @@ pub fn pressure_leave_one_out(lut: &Lut) -> Vec<PressureInterpolationError> {
     let inflated: Vec<usize> = (0..g.pressure_kpa.len())
         .filter(|&j| g.pressure_kpa[j] > 0.0)
         .collect();
-    let e = &g.effects;
-    let mut slices = Vec::new();
-    for stiffening in 0..e.stiffening.len() {
-        for material in 0..e.material.len() {
-            for friction in 0..e.friction.len() {
-                for thickness in 0..e.sample_thickness_mm.len() {
-                    slices.push((stiffening, material, friction, thickness));
-                }
-            }
-        }
-    }
+    let slices = effect_slices(lut);
     let mut out = Vec::new();
     for left in 1..inflated.len().saturating_sub(1) {
         // the remaining inflated nodes, as grid indices and pressures
@@ -204,7 +233,7 @@ pub fn pressure_leave_one_out(lut: &Lut) -> Vec<PressureInterpolationError> {
         let p = g.pressure_kpa[inflated[left]];
         let k = left - 1;
         let weights = pressure_weights::hermite_weights(&xs, k, p, k >= 1, k + 2 < xs.len());
-        let (mut max_um, mut sum_sq, mut points, mut worst) = (0.0f64, 0.0, 0usize, f64::NAN);
+        let mut tally = Tally::new();
         let mut slices_compared = 0;
         for &(stiffening, material, friction, thickness) in &slices {
             let curve = |jp: usize, m: usize| {
@@ -218,7 +247,7 @@ pub fn pressure_leave_one_out(lut: &Lut) -> Vec<PressureInterpolationError> {
                 }))
                 .filter(|c| c.failure.is_none() && c.u_s_mm.len() >= 2)
             };
-            let points_before = points;
+            let points_before = tally.points;
             for m in 0..g.modulus_kpa.len() {
                 let Some(left_out) = curve(inflated[left], m) else {
                     continue;
@@ -232,33 +261,25 @@ pub fn pressure_leave_one_out(lut: &Lut) -> Vec<PressureInterpolationError> {
                     .iter()
                     .map(|&(c, _)| max_u_s(c))
                     .fold(max_u_s(left_out), f64::min);
-                let count = ((reach - U_S_MIN_MM) / U_S_STEP_MM + 1e-9).floor();
-                for i in 0..=(count.max(-1.0) as i64) {
-                    let u = U_S_MIN_MM + i as f64 * U_S_STEP_MM;
+                for u in u_s_lattice(reach) {
                     let pred: Option<f64> =
                         used.iter().map(|&(c, w)| a_at(c, u).map(|a| w * a)).sum();
                     if let (Some(pred), Some(truth)) = (pred, a_at(left_out, u)) {
-                        let d_um = 1e3 * (pred - truth).abs();
-                        if d_um > max_um {
-                            max_um = d_um;
-                            worst = g.modulus_kpa[m];
-                        }
-                        sum_sq += d_um * d_um;
-                        points += 1;
+                        tally.add(pred, truth, g.modulus_kpa[m]);
                     }
                 }
             }
-            if points > points_before {
+            if tally.points > points_before {
                 slices_compared += 1;
             }
         }
-        if points > 0 {
+        if tally.points > 0 {
             out.push(PressureInterpolationError {
                 pressure_kpa: p,
-                max_um,
-                rms_um: (sum_sq / points as f64).sqrt(),
-                worst_modulus_kpa: worst,
-                points,
+                max_um: tally.max_um,
+                rms_um: tally.rms_um(),
+                worst_modulus_kpa: tally.worst_modulus_kpa,
+                points: tally.points,
                 slices: slices_compared,
             });
         }

@@ -311,6 +311,15 @@ fn info(a: InfoArgs) -> ExitCode {
     ExitCode::SUCCESS
 }
 
+/// "; over N slices of the effect axes" when a figure covers more than one slice.
+fn over_slices(slices: usize) -> String {
+    if slices > 1 {
+        format!("; over {slices} slices of the effect axes")
+    } else {
+        String::new()
+    }
+}
+
 fn axis(v: &[f64]) -> String {
     v.iter()
         .map(|x| x.to_string())
@@ -382,11 +391,7 @@ fn describe(path: &Path, file: &LutFile) -> String {
             e.max_um,
             e.rms_um,
             e.worst_modulus_kpa,
-            if e.slices > 1 {
-                format!("; over {} slices of the effect axes", e.slices)
-            } else {
-                String::new()
-            }
+            over_slices(e.slices)
         ));
     }
     for e in fem_core::lut::interpolation_error::pressure_leave_one_out(lut) {
@@ -398,11 +403,7 @@ fn describe(path: &Path, file: &LutFile) -> String {
             e.max_um,
             e.rms_um,
             e.worst_modulus_kpa,
-            if e.slices > 1 {
-                format!("; over {} slices of the effect axes", e.slices)
-            } else {
-                String::new()
-            }
+            over_slices(e.slices)
         ));
     }
     let ok: Vec<_> = lut.curves.iter().filter(|c| c.failure.is_none()).collect();
