@@ -15,6 +15,15 @@ use fem_core::lut::{
 use lut_common::{STANDIN, standin_a_mm, standin_solver};
 
 fn table(per_decade: usize) -> Lut {
+    table_solved_by(per_decade, &standin_solver)
+}
+
+/// The test grid (E2 10..1000 kPa, `per_decade` per decade; p_air 0..30 kPa) built by
+/// `solver`.
+fn table_solved_by(
+    per_decade: usize,
+    solver: &(dyn Fn(&CurveParams) -> Result<fem_core::Curve, String> + Sync),
+) -> Lut {
     let base = CurveParams {
         steps: 40,
         ..CurveParams::default()
@@ -25,7 +34,7 @@ fn table(per_decade: usize) -> Lut {
         log_spaced(10.0, 1000.0, 2 * per_decade + 1),
         vec![0.0, 6.0, 10.0, 15.0, 20.0, 30.0],
     );
-    build_lut(&g, None, &standin_solver, STANDIN, &|_| {}).unwrap()
+    build_lut(&g, None, &|p: &CurveParams| solver(p), STANDIN, &|_| {}).unwrap()
 }
 
 /// Max relative errors of a and of d a / d ln E2 over a sweep of off-node queries.
@@ -480,16 +489,6 @@ fn across_p_air_a_cubic_continuous_where_an_outer_pressure_curve_ends() {
 /// reads between 0 and 6 kPa are the straight line to the deflated node.
 #[test]
 fn the_deflated_node_stays_out_of_the_cubic() {
-    let base = CurveParams {
-        steps: 40,
-        ..CurveParams::default()
-    };
-    let g = LutGrid::with_axes(
-        "interp-test",
-        base,
-        log_spaced(10.0, 1000.0, 13),
-        vec![0.0, 6.0, 10.0, 15.0, 20.0, 30.0],
-    );
     let off_when_deflated = |p: &CurveParams| -> Result<fem_core::Curve, String> {
         let mut c = standin_solver(p)?;
         if p.pressure_kpa == 0.0 {
@@ -499,7 +498,7 @@ fn the_deflated_node_stays_out_of_the_cubic() {
         }
         Ok(c)
     };
-    let lut = build_lut(&g, None, &off_when_deflated, STANDIN, &|_| {}).unwrap();
+    let lut = table_solved_by(6, &off_when_deflated);
     let slice = lut.slice(&EffectSelection::default()).unwrap();
     let at = |p: f64, u: f64| a_at_100_kpa(&slice, p, u);
     let u = 0.2;
