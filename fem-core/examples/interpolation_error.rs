@@ -8,8 +8,9 @@
 //! [nodes]` (default pressures: the table's, without 0). With `nodes` the curves are
 //! solved at the table's modulus nodes instead, so that at pressures between the table's
 //! pressure nodes only the interpolation across p_air differs (`lut::pressure_weights`).
-//! Per pressure: the largest and RMS |a(table) - a(direct)| over the direct curve's load steps with u_s >= 0.2 mm inside the
-//! table's range, and where the largest sits. A table built with the edge band is solved
+//! Per pressure: the largest and RMS |a(table) - a(direct)| over the direct curve's load
+//! steps with u_s >= 0.2 mm inside the table's range, and where the largest sits; then the
+//! same for the load P (what the diagnosis's load channel reads from the table). A table built with the edge band is solved
 //! with it (about 30 s per curve; the plain production mesh takes about 1.5 s).
 //!
 //! `interpolation_error -- TABLE --truth TRUTH.lut` reads the direct curves from a table
@@ -69,6 +70,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     for p in pressures {
         let (mut max_um, mut sum_sq, mut n, mut worst) = (0.0f64, 0.0, 0usize, (0.0, 0.0));
+        let (mut max_mn, mut sum_sq_mn, mut worst_load) = (0.0f64, 0.0, (0.0, 0.0));
         for &e in &moduli {
             let mut params = lut.grid.base.clone();
             params.sample_modulus_kpa = e;
@@ -78,7 +80,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             } else {
                 Simulation::new(&params)
             };
-            let points: Vec<(f64, f64)> = match &truth {
+            let points: Vec<(f64, f64, f64)> = match &truth {
                 Some(t) => {
                     let g = &t.lut.grid;
                     let (jp, je) = (
@@ -95,8 +97,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                         Some(c) if c.failure.is_none() => c
                             .u_s_mm
                             .iter()
-                            .copied()
-                            .zip(c.a_mm.iter().copied())
+                            .zip(&c.a_mm)
+                            .zip(&c.load_n)
+                            .map(|((&u, &a), &load)| (u, a, load))
                             .collect(),
                         _ => continue,
                     }
@@ -106,10 +109,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     .curve
                     .points
                     .iter()
-                    .map(|pt| (pt.u_s_mm, pt.a_mm))
+                    .map(|pt| (pt.u_s_mm, pt.a_mm, pt.load_n))
                     .collect(),
             };
-            for (u_s_mm, a_mm) in points.into_iter().filter(|&(u, _)| u >= 0.2) {
+            for (u_s_mm, a_mm, load_n) in points.into_iter().filter(|&(u, _, _)| u >= 0.2) {
                 let q = LutQuery {
                     modulus_kpa: e,
                     pressure_kpa: p,
@@ -124,6 +127,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     worst = (e, u_s_mm);
                 }
                 sum_sq += d_um * d_um;
+                let d_mn = 1e3 * (s.load_n - load_n).abs();
+                if d_mn > max_mn {
+                    max_mn = d_mn;
+                    worst_load = (e, u_s_mm);
+                }
+                sum_sq_mn += d_mn * d_mn;
                 n += 1;
             }
         }
@@ -134,6 +143,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             worst.0,
             worst.1,
             (sum_sq / n.max(1) as f64).sqrt()
+        );
+        println!(
+            "  load: |P(table) - P(direct)| largest {max_mn:.3} mN (E2 {:.1} kPa, u_s {:.2} mm), RMS {:.3} mN",
+            worst_load.0,
+            worst_load.1,
+            (sum_sq_mn / n.max(1) as f64).sqrt()
         );
     }
     Ok(())
