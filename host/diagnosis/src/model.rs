@@ -45,12 +45,17 @@ impl Channel {
     }
 }
 
-/// Half-width (mm of u_s) of the window over which a pressure reference's change is
-/// averaged ([`Surface::with_pressure_reference`]): about half the period of the wiggle a
-/// mesh level -2 thickness table's change between two pressures showed along u_s (its sign
-/// turned every 0.4-0.5 mm at 170 kPa). On the production-mesh table the raw change
-/// wiggles by up to +-5 um at 4.5 kPa (146.8 kPa) and the averaged one is within 1.4 um of
-/// converged solves up to u_s 1.4 mm (docs/diagnosis.md, Method, step 3).
+/// Half-width (mm of u_s) of the window over which the change of a pressure reference
+/// solved without the band of fine elements at the contact edge is averaged
+/// ([`Surface::with_pressure_reference`]): about half the period of the wiggle a mesh level
+/// -2 thickness table's change between two pressures showed along u_s (its sign turned
+/// every 0.4-0.5 mm at 170 kPa). On a production-mesh table the raw change wiggles by up to
+/// +-5 um at 4.5 kPa (146.8 kPa) and the averaged one is within 1.4 um of converged solves
+/// up to u_s 1.4 mm (docs/diagnosis.md, Method, step 3). A reference solved with the band
+/// has no such wiggle, and there the average only blurs the change's curvature along u_s:
+/// the load of a true 4 kPa read from 6 kPa (170 kPa) came 0.39 mN RMS and up to 0.61 mN
+/// low against a converged solve, and its raw change 0.03 mN RMS. So a band-solved
+/// reference is read as it is.
 pub const REFERENCE_WINDOW_MM: f64 = 0.25;
 
 /// Samples of u_s across that window (odd: one at its centre).
@@ -67,6 +72,10 @@ pub struct Surface<'a> {
     /// a(p) = a_self(p_n) + a_ref(p) - a_ref(p_n) with p_n the nearest node, where the
     /// reference covers both (see [`Surface::with_pressure_reference`]).
     pressure_reference: Option<Box<Surface<'a>>>,
+    /// Half-width (mm of u_s) of the window over which this surface's change between two
+    /// pressures is averaged when it serves as a pressure reference: [`REFERENCE_WINDOW_MM`]
+    /// for a table solved without the edge band, none for one solved with it.
+    change_window_mm: f64,
 }
 
 impl<'a> Surface<'a> {
@@ -79,6 +88,11 @@ impl<'a> Surface<'a> {
             pressures: lut.grid.pressure_kpa.clone(),
             moduli: lut.grid.modulus_kpa.clone(),
             pressure_reference: None,
+            change_window_mm: if lut.edge_band.is_some() {
+                0.0
+            } else {
+                REFERENCE_WINDOW_MM
+            },
         })
     }
 
@@ -177,13 +191,22 @@ impl<'a> Surface<'a> {
     }
 
     /// The change of this surface from pressure `p0` to `p1` at u_s, averaged over a window
-    /// of u_s centred on it ([`REFERENCE_WINDOW_MM`] each side, narrowed near the ends of the
-    /// u_s range so that the window stays symmetric and a linear trend is kept): a table
-    /// mesh's contact edge moves from node to node in steps, at u_s positions that shift with
-    /// p_air, so the change between two pressures wiggles along u_s with the element size.
+    /// of u_s centred on it (`change_window_mm` each side, narrowed near the ends of the
+    /// u_s range so that the window stays symmetric and a linear trend is kept): a
+    /// production mesh's contact edge moves from node to node in steps, at u_s positions
+    /// that shift with p_air, so the change between two pressures wiggles along u_s with
+    /// the element size. A band-solved table's change is taken at u_s itself.
     pub(crate) fn smoothed_change(&self, e: f64, p0: f64, p1: f64, u: f64) -> ModelSample {
+        if self.change_window_mm <= 0.0 {
+            let (s1, s0) = (self.sample(e, p1, u), self.sample(e, p0, u));
+            return ModelSample {
+                a_mm: s1.a_mm - s0.a_mm,
+                load_n: s1.load_n - s0.load_n,
+                h_mm: s1.h_mm - s0.h_mm,
+            };
+        }
         let half = match (self.u_s_range_mm(e, p0), self.u_s_range_mm(e, p1)) {
-            (Some((lo0, hi0)), Some((lo1, hi1))) => REFERENCE_WINDOW_MM
+            (Some((lo0, hi0)), Some((lo1, hi1))) => self.change_window_mm
                 .min(u - lo0.max(lo1))
                 .min(hi0.min(hi1) - u)
                 .max(0.0),

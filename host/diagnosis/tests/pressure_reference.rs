@@ -1,9 +1,8 @@
 //! The converged baseline read between its pressure nodes (`Surface::with_pressure_reference`):
 //! on its nodes it is its own table, below its first inflated node it moves as the thickness
-//! table's 1 kPa steps move (that change averaged along u_s), and elsewhere it is its own
-//! interpolation. Whether the coarse reference's change is right against converged solves
-//! is measured in `tests/tests/diagnose_table_error.rs` (`pressure_continuation_error`
-//! with `DIAG_CONVERGED=1`).
+//! table's 1 kPa steps move, and elsewhere it is its own interpolation. How close that
+//! comes to converged solves is measured in `tests/tests/diagnose_table_error.rs`
+//! (`pressure_continuation_error` with `DIAG_CONVERGED=1`).
 
 use diagnosis::model::{Model, Surface};
 use diagnosis::tables::{EffectAxis, shipped_tables};
@@ -25,9 +24,9 @@ fn below_its_first_inflated_node_the_converged_baseline_moves_as_the_dense_table
     // on a node of the converged table: its own value
     let at_node = model.base.sample(e, 6.0, u);
     assert_eq!(at_node, own.sample(e, 6.0, u));
+    let at_node_at = |x: f64| own.sample(e, 6.0, x).a_mm;
     // 1.5 kPa below it (below the first inflated node): the node's value plus the
-    // reference's change, averaged along u_s, not the converged table's own chord between 0
-    // and 6 kPa
+    // reference's change, not the converged table's own chord between 0 and 6 kPa
     let moved = model.base.sample(e, 4.5, u);
     let raw_change = |u: f64| reference.sample(e, 4.5, u).a_mm - reference.sample(e, 6.0, u).a_mm;
     let change = moved.a_mm - at_node.a_mm;
@@ -36,30 +35,16 @@ fn below_its_first_inflated_node_the_converged_baseline_moves_as_the_dense_table
     // 15), by far more than the micrometres the tables are accurate to
     assert!(change < -0.002, "change {change}");
     assert!((moved.a_mm - own.sample(e, 4.5, u).a_mm).abs() > 1e-6);
-    // the average of the raw change over the window (0.25 mm each side) lies between its
-    // extremes there
-    let raw: Vec<f64> = (0..=50)
-        .map(|k| raw_change(u - 0.25 + 0.01 * k as f64))
-        .collect();
-    let (lo, hi) = raw
-        .iter()
-        .fold((f64::MAX, f64::MIN), |(l, h), &x| (l.min(x), h.max(x)));
-    assert!(lo <= change && change <= hi, "{change} outside {lo}..{hi}");
-    // and the averaging makes it no rougher along u_s (second differences over 0.1 mm steps
-    // across 0.3-1.5 mm). The thickness table is solved with the edge band, so its raw change
-    // is already smooth (measured: 10.7 um summed, 10.0 averaged); on the production mesh,
-    // whose contact edge moves in steps, the averaged change had half the raw one's wiggle
-    let roughness = |f: &dyn Fn(f64) -> f64| -> f64 {
-        (3..15)
-            .map(|k| {
-                let x = 0.1 * k as f64;
-                (f(x + 0.1) - 2.0 * f(x) + f(x - 0.1)).abs()
-            })
-            .sum()
-    };
-    let smoothed = |u: f64| model.base.sample(e, 4.5, u).a_mm - own.sample(e, 6.0, u).a_mm;
-    let (r_raw, r_smooth) = (roughness(&raw_change), roughness(&smoothed));
-    assert!(r_smooth <= r_raw, "roughness {r_smooth} vs raw {r_raw}");
+    // the thickness table is solved with the band of fine elements at the contact edge, so
+    // its change is read at u_s itself: averaged over +-0.25 mm of u_s it blurred the
+    // change's curvature (the load of a true 4 kPa read from 6 kPa at 170 kPa came 0.39 mN
+    // RMS low against a converged solve, the change at u_s itself 0.03 mN)
+    assert!(t.lut.edge_band.is_some());
+    for k in 0..=12 {
+        let x = 0.2 + 0.1 * k as f64;
+        let moved = model.base.sample(e, 4.5, x).a_mm - at_node_at(x);
+        assert!((moved - raw_change(x)).abs() < 1e-12, "u_s {x}: {moved} vs {}", raw_change(x));
+    }
     // between inflated nodes (8 kPa, between 6 and 10) the converged table's own chord,
     // which is within about 1 um of converged solves there, where the reference's change
     // wiggles by several
