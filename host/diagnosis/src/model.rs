@@ -206,7 +206,8 @@ impl<'a> Surface<'a> {
             };
         }
         let half = match (self.u_s_range_mm(e, p0), self.u_s_range_mm(e, p1)) {
-            (Some((lo0, hi0)), Some((lo1, hi1))) => self.change_window_mm
+            (Some((lo0, hi0)), Some((lo1, hi1))) => self
+                .change_window_mm
                 .min(u - lo0.max(lo1))
                 .min(hi0.min(hi1) - u)
                 .max(0.0),

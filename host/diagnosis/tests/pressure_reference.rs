@@ -43,7 +43,11 @@ fn below_its_first_inflated_node_the_converged_baseline_moves_as_the_dense_table
     for k in 0..=12 {
         let x = 0.2 + 0.1 * k as f64;
         let moved = model.base.sample(e, 4.5, x).a_mm - at_node_at(x);
-        assert!((moved - raw_change(x)).abs() < 1e-12, "u_s {x}: {moved} vs {}", raw_change(x));
+        assert!(
+            (moved - raw_change(x)).abs() < 1e-12,
+            "u_s {x}: {moved} vs {}",
+            raw_change(x)
+        );
     }
     // between inflated nodes (8 kPa, between 6 and 10) the converged table's own chord,
     // which is within about 1 um of converged solves there, where the reference's change
