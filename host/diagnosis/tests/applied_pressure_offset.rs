@@ -81,10 +81,11 @@ fn a_manometer_offset_below_the_first_inflated_node_is_read_through_the_dense_ta
         .expect("fit with the model")
         .modulus_kpa;
     // The truth and the table share mesh and steps; what remains is the table's
-    // interpolation across E2 (a few um in a, up to about 0.3 % in E2 at 170 kPa), the
-    // reference's cubic between its 4 and 5 kPa nodes and its change averaged along u_s
-    // (measured: +0.13 %; +0.07 % with a chord there). 0.5 % is an eighth of what the straight line between 0 and
-    // 6 kPa makes here (-4.0 %, below).
+    // interpolation across E2 (a few um in a, up to about 0.3 % in E2 at 170 kPa) and the
+    // reference's cubic between its 4 and 5 kPa nodes (measured: +0.12 %; +0.13 % with
+    // the change averaged along u_s, +0.07 % with that and a chord between the nodes). 0.5 %
+    // is an eighth of what the straight line between 0 and 6 kPa makes here (-4.0 %,
+    // below).
     let error = fitted / true_kpa - 1.0;
     assert!(
         error.abs() < 0.005,
