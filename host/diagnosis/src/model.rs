@@ -557,6 +557,36 @@ impl<'a> Model<'a> {
 mod tests {
     use super::along_axis;
 
+    /// A table solved without the edge band (the production mesh) has its change between
+    /// two pressures averaged along u_s; one solved with it is read at u_s itself. The
+    /// average lies between the raw change's extremes over the window (0.25 mm each side).
+    #[test]
+    fn only_a_table_without_the_band_has_its_change_averaged() {
+        use fem_core::lut::EffectSelection;
+        let production = crate::tables::production_baseline().expect("production table");
+        let converged = crate::tables::converged_baseline().expect("converged table");
+        let sel = EffectSelection::default();
+        let coarse = super::Surface::new(&production, &sel).expect("surface");
+        let band = super::Surface::new(&converged, &sel).expect("surface");
+        assert_eq!(coarse.change_window_mm, super::REFERENCE_WINDOW_MM);
+        assert_eq!(band.change_window_mm, 0.0);
+        let (e, u) = (170.0, 0.8);
+        let raw =
+            |s: &super::Surface<'_>, x: f64| s.sample(e, 10.0, x).a_mm - s.sample(e, 6.0, x).a_mm;
+        assert_eq!(band.smoothed_change(e, 6.0, 10.0, u).a_mm, raw(&band, u));
+        let averaged = coarse.smoothed_change(e, 6.0, 10.0, u).a_mm;
+        let (lo, hi) = (0..=50)
+            .map(|k| raw(&coarse, u - 0.25 + 0.01 * k as f64))
+            .fold((f64::MAX, f64::MIN), |(l, h), x| (l.min(x), h.max(x)));
+        assert!(
+            lo <= averaged && averaged <= hi,
+            "{averaged} outside {lo}..{hi}"
+        );
+        // the production mesh's raw change wiggles along u_s, so the average differs from
+        // the raw value at u_s (a pass-through would make the two equal)
+        assert!((averaged - raw(&coarse, u)).abs() > 1e-9);
+    }
+
     const NODES: [f64; 5] = [0.0, 2.0, 5.0, 10.0, 20.0];
 
     #[test]
