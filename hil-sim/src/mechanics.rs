@@ -7,7 +7,12 @@
 //! - [`CurveMechanics`]: a family of fem-core curves (one or more sample moduli E2 and
 //!   internal pressures p_air for one sample geometry); piecewise-linear interpolation in h
 //!   along each curve, then linear in ln E2 and in p_air between the bracketing curves,
-//!   clamped at the family's edges (clamping is counted). The pressure dependence of the
+//!   clamped at the family's edges in E2 and h (clamping is counted). In p_air the
+//!   family is continued linearly from its two outermost pressures up to
+//!   [`PRESSURE_EXTRAPOLATION_KPA`] beyond them: a held pressure rises a few hundredths of
+//!   a kPa as the indentation compresses the shell, at the family's top pressure too, and
+//!   the load at a given u_s follows it (about 20 mN per kPa at u_s 1.1 mm); clamped
+//!   there, the simulated bench would not respond to that rise at all. The pressure dependence of the
 //!   inflated volume with a single pressure is the linear shell compliance
 //!   V(p) = V_rest + (V_inflated - V_rest) p / p_curve.
 //! - [`RigidMechanics`]: a rigid flat sample (calibration), in the membrane limit of the
@@ -174,6 +179,28 @@ fn distinct_sorted(values: impl Iterator<Item = f64>) -> Vec<f64> {
     v
 }
 
+/// How far (kPa) beyond its outermost pressures a family of curves is continued linearly
+/// ([`CurveMechanics`]); further out the nearest pressure's curve is held.
+pub const PRESSURE_EXTRAPOLATION_KPA: f64 = 1.0;
+
+/// [`bracket`] for p_air: beyond the outermost nodes the weight continues linearly (below 0
+/// or above 1) up to `reach` past the edge, then holds.
+fn pressure_bracket(nodes: &[f64], x: f64, reach: f64) -> (usize, f64) {
+    let n = nodes.len();
+    if n == 1 {
+        return (0, 0.0);
+    }
+    let x = x.clamp(nodes[0] - reach, nodes[n - 1] + reach);
+    let k = if x <= nodes[0] {
+        0
+    } else if x >= nodes[n - 1] {
+        n - 2
+    } else {
+        nodes.partition_point(|&v| v <= x).clamp(1, n - 1) - 1
+    };
+    (k, (x - nodes[k]) / (nodes[k + 1] - nodes[k]))
+}
+
 /// Index of the lower bracketing node and the weight of the upper one, clamped.
 fn bracket(nodes: &[f64], x: f64) -> (usize, f64, bool) {
     let n = nodes.len();
@@ -245,7 +272,7 @@ impl CurveMechanics {
 impl MechanicsModel for CurveMechanics {
     fn contact(&self, h_mm: f64, pressure_kpa: f64, modulus_kpa: f64) -> ContactState {
         let (im, wm, cm) = bracket(&self.ln_moduli, modulus_kpa.max(1e-9).ln());
-        let (ip, wp, _) = bracket(&self.pressures, pressure_kpa);
+        let (ip, wp) = pressure_bracket(&self.pressures, pressure_kpa, PRESSURE_EXTRAPOLATION_KPA);
         let nm = self.ln_moduli.len().min(im + 2);
         let np = self.pressures.len().min(ip + 2);
         let mut acc = [0.0f64; 4];
@@ -436,6 +463,30 @@ mod tests {
         let free = m.contact(-0.2, 6.0, 100.0);
         assert_eq!(free.a_mm, 0.0);
         assert!((free.shell_volume_mm3 - 476.0).abs() < 1e-12);
+    }
+
+    /// Beyond the family's pressures (6 and 15 kPa) the curves continue linearly for
+    /// [`PRESSURE_EXTRAPOLATION_KPA`], then hold: the fixture's apex rise is 0.01 mm per kPa
+    /// and its inflated volume 470 + p mm^3, both linear, so the continuation is exact.
+    #[test]
+    fn pressure_continues_linearly_just_beyond_the_family() {
+        let curves: Vec<Curve> = [6.0, 15.0].map(|p| fixture_curve(200.0, p)).to_vec();
+        let m = CurveMechanics::new(&curves).unwrap();
+        for (p, held) in [
+            (15.05, 15.05),
+            (15.5, 15.5),
+            (5.2, 5.2),
+            (16.5, 16.0),
+            (4.0, 5.0),
+        ] {
+            let free = m.contact(-0.1, p, 200.0);
+            assert!(
+                (free.inflation_apex_mm - 0.01 * held).abs() < 1e-12,
+                "p {p}: apex {}",
+                free.inflation_apex_mm
+            );
+            assert!((free.shell_volume_mm3 - (470.0 + held)).abs() < 1e-9);
+        }
     }
 
     #[test]
