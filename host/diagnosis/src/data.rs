@@ -10,12 +10,7 @@ use fit::curve_csv::{CurveCsv, Phase};
 pub struct Point {
     pub u_s_mm: f64,
     pub a_mm: f64,
-    /// The set point: the file's `# p_air_kpa:` line, else the row's pressure.
     pub p_air_kpa: f64,
-    /// The manometer's reading minus the set point, where a file gives both (a record: the
-    /// pressure rises as the indentation compresses the shell); 0 otherwise
-    /// ([`crate::pressure_excursion`]).
-    pub p_excursion_kpa: f64,
     /// Replicate id (unique over all files).
     pub test: u32,
     pub load_n: Option<f64>,
@@ -37,29 +32,9 @@ pub enum DataError {
     BadPressure { file: String, value: String },
     #[error("{file}: no loading points with contact (a_mm > 0)")]
     Empty { file: String },
-    #[error(
-        "{file}: data row {row} reads p_air_kpa = {reading} against the set point {set} kPa of its '# p_air_kpa:' line: the pressure was not held (more than {limit} kPa off), or the file mixes pressures (then leave out the '# p_air_kpa:' line)"
-    )]
-    PressureNotHeld {
-        file: String,
-        row: usize,
-        reading: f64,
-        set: f64,
-        limit: f64,
-    },
 }
 
-/// The largest |reading - set point| taken as the controller's excursion around its set
-/// point: the first-order correction ([`crate::pressure_excursion`]) is exact to a few per
-/// cent of itself there (the load's change with p_air is within 2 % of a straight line
-/// between 4 and 6 kPa and between 13 and 15 kPa at 170 kPa); a bench holding its pressure
-/// stays within about 0.1 kPa.
-pub const MAX_PRESSURE_EXCURSION_KPA: f64 = 3.0;
-
-/// Loading points with contact from `curves` (each with its file name for errors). A
-/// file's `# p_air_kpa:` line is its set point, which its points are grouped by (as the
-/// host's fit reads it); rows that also carry a `p_air_kpa` reading give each point's
-/// excursion from it.
+/// Loading points with contact from `curves` (each with its file name for errors).
 pub fn points_from_curves(curves: &[(String, CurveCsv)]) -> Result<Vec<Point>, DataError> {
     let mut out = Vec::new();
     for (k, (file, curve)) in curves.iter().enumerate() {
@@ -75,7 +50,7 @@ pub fn points_from_curves(curves: &[(String, CurveCsv)]) -> Result<Vec<Point>, D
             None => None,
         };
         let before = out.len();
-        for (row_index, row) in curve.rows.iter().enumerate() {
+        for row in &curve.rows {
             if row.phase == Some(Phase::Unload)
                 || row.a_mm.is_nan()
                 || row.a_mm <= 0.0
@@ -83,27 +58,14 @@ pub fn points_from_curves(curves: &[(String, CurveCsv)]) -> Result<Vec<Point>, D
             {
                 continue;
             }
-            let p = default_p
-                .or(row.p_air_kpa)
+            let p = row
+                .p_air_kpa
+                .or(default_p)
                 .ok_or_else(|| DataError::NoPressure { file: file.clone() })?;
-            let excursion = match (default_p, row.p_air_kpa) {
-                (Some(set), Some(reading)) => reading - set,
-                _ => 0.0,
-            };
-            if excursion.abs() > MAX_PRESSURE_EXCURSION_KPA || !excursion.is_finite() {
-                return Err(DataError::PressureNotHeld {
-                    file: file.clone(),
-                    row: row_index + 1,
-                    reading: p + excursion,
-                    set: p,
-                    limit: MAX_PRESSURE_EXCURSION_KPA,
-                });
-            }
             out.push(Point {
                 u_s_mm: row.u_s_mm,
                 a_mm: row.a_mm,
                 p_air_kpa: p,
-                p_excursion_kpa: excursion,
                 test: k as u32 * 10_000 + row.test.unwrap_or(0),
                 load_n: row.load_n,
                 t_s: row.t_s,
@@ -236,7 +198,6 @@ fn mean_point(bin: &[Point]) -> Point {
         u_s_mm: mean(&|q| q.u_s_mm),
         a_mm: mean(&|q| q.a_mm),
         p_air_kpa: bin[0].p_air_kpa,
-        p_excursion_kpa: mean(&|q| q.p_excursion_kpa),
         test: bin[0].test,
         load_n: mean_opt(&|q| q.load_n),
         t_s: mean_opt(&|q| q.t_s),
@@ -254,7 +215,6 @@ mod tests {
             u_s_mm: u,
             a_mm: 2.0 * u,
             p_air_kpa: p,
-            p_excursion_kpa: 0.0,
             test,
             load_n: Some(u),
             t_s: None,
@@ -294,34 +254,5 @@ mod tests {
         bin_points(&mut pts, MAX_POINTS_PER_PRESSURE);
         assert!(pts.len() <= MAX_POINTS_PER_PRESSURE, "{}", pts.len());
         assert!(pts.len() > MAX_POINTS_PER_PRESSURE / 2);
-    }
-
-    /// A record's curve: its `# p_air_kpa:` line is the set point the points are grouped
-    /// by, its rows' readings the excursion from it; a file without the line groups by its
-    /// rows; a reading far from the set point is refused with the file and row.
-    #[test]
-    fn the_set_point_groups_and_the_readings_give_the_excursion() {
-        let text = "# p_air_kpa: 6\nu_s_mm,a_mm,p_air_kpa,test\n0.1,1.0,6.02,0\n0.2,1.4,6.05,0\n0.3,1.7,5.99,1\n";
-        let curve = fit::curve_csv::parse_curve_csv(text, "record.csv").expect("csv");
-        let pts = points_from_curves(&[("record.csv".into(), curve)]).expect("points");
-        assert!(pts.iter().all(|q| q.p_air_kpa == 6.0));
-        let ex: Vec<f64> = pts.iter().map(|q| q.p_excursion_kpa).collect();
-        for (got, want) in ex.iter().zip([0.02, 0.05, -0.01]) {
-            assert!((got - want).abs() < 1e-12, "{ex:?}");
-        }
-        let text = "u_s_mm,a_mm,p_air_kpa\n0.1,1.0,6.02\n0.2,1.4,15\n";
-        let curve = fit::curve_csv::parse_curve_csv(text, "rows.csv").expect("csv");
-        let pts = points_from_curves(&[("rows.csv".into(), curve)]).expect("points");
-        assert_eq!(pressures(&pts), vec![6.02, 15.0]);
-        assert!(pts.iter().all(|q| q.p_excursion_kpa == 0.0));
-        let text = "# p_air_kpa: 6\nu_s_mm,a_mm,p_air_kpa\n0.1,1.0,6.02\n0.2,1.4,15\n";
-        let curve = fit::curve_csv::parse_curve_csv(text, "mixed.csv").expect("csv");
-        let err = points_from_curves(&[("mixed.csv".into(), curve)])
-            .expect_err("15 kPa is not an excursion around 6")
-            .to_string();
-        assert!(
-            err.contains("mixed.csv") && err.contains("row 2") && err.contains("15"),
-            "{err}"
-        );
     }
 }

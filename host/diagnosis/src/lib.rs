@@ -31,7 +31,6 @@ pub mod load_channel;
 pub mod localisation;
 pub mod model;
 pub mod noise_model;
-pub mod pressure_excursion;
 pub mod report;
 pub mod selection;
 pub mod signatures;
@@ -350,18 +349,6 @@ pub fn diagnose(
         fit::FitOptions::default(),
     )?;
     let e_host = host_fit.modulus_kpa;
-    // the pressure's excursion from its set point during each indentation, where the data
-    // record it (pressure_excursion.rs)
-    let excursion = pressure_excursion::correct(&model, e_host, &mut points);
-    if excursion.points > 0 {
-        notes.push(format!(
-            "pressure excursion: the manometer read {:+.3} to {:+.3} kPa from the set point during the indentations (smoothed along each); the baseline's change with p_air over it was removed from the data: at most {:.4} mm in a, {:.2} mN in the load",
-            excursion.min_kpa,
-            excursion.max_kpa,
-            excursion.worst_a_mm,
-            1e3 * excursion.worst_load_n
-        ));
-    }
     let subset = usable(&model, &points, e_host);
     if subset.len() < 8 {
         return Err(DiagnoseError::Data(format!(
@@ -832,7 +819,6 @@ mod usable_tests {
                     load_n: None,
                     t_s: None,
                     h_mm: None,
-                    p_excursion_kpa: 0.0,
                     h_zero_fitted: false,
                 }
             })

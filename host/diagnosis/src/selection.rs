@@ -707,7 +707,6 @@ mod tests {
                     load_n: None,
                     t_s: Some(t),
                     h_mm: Some(t),
-                    p_excursion_kpa: 0.0,
                     h_zero_fitted: false,
                 });
                 r.push(common(t) + walk);

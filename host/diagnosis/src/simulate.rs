@@ -506,7 +506,6 @@ pub fn simulate_with(spec: &SimSpec, scenario: &Scenario, truth: &Truth) -> Vec<
                     load_n: Some(cs.load_n + load_tare + rng.normal(white_load_n)),
                     t_s: Some(t),
                     h_mm: Some(h),
-                    p_excursion_kpa: 0.0,
                     h_zero_fitted: false,
                 });
             }

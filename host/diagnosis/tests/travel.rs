@@ -133,7 +133,6 @@ fn a_stage_position_with_unknown_zeros_is_checked_with_one_fitted_zero_per_repli
                 h_mm: p
                     .h_mm
                     .map(|h| h + 3.0 + shift * (p.test as f64 + 0.1 * p.p_air_kpa)),
-                p_excursion_kpa: 0.0,
                 h_zero_fitted: true,
                 ..*p
             })

@@ -193,11 +193,10 @@ pub enum RecordCurveError {
     Curve(#[from] fit::curve_csv::CurveCsvError),
 }
 
-/// The curve of a record folder: its `curve.csv`, with the record's nominal pressure (the
-/// plan's set point from `meta.json`) as its `# p_air_kpa:` line, which readers group the
-/// points by. The rows keep the manometer's readings, which scatter around the set point
-/// and rise as the indentation compresses the shell (the diagnosis corrects for that
-/// excursion). A record still running or failed is refused by name.
+/// The curve of a record folder: its `curve.csv`, at the record's nominal pressure (the
+/// plan's set point from `meta.json`; the per-row manometer readings scatter around it, and
+/// grouping by them would split one pressure into many). A record still running or failed
+/// is refused by name.
 pub fn record_curve_at_set_pressure(
     dir: &std::path::Path,
 ) -> Result<fit::curve_csv::CurveCsv, RecordCurveError> {
@@ -209,6 +208,9 @@ pub fn record_curve_at_set_pressure(
         });
     }
     let mut curve = fit::curve_csv::read_curve_csv(&dir.join("curve.csv"))?;
+    for row in &mut curve.rows {
+        row.p_air_kpa = None;
+    }
     curve.metadata.retain(|(k, _)| k != "p_air_kpa");
     curve
         .metadata

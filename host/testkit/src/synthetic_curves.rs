@@ -81,7 +81,6 @@ pub fn generate(
                     load_n: None,
                     t_s: None,
                     h_mm: None,
-                    p_excursion_kpa: 0.0,
                     h_zero_fitted: false,
                 };
                 let e = spec.modulus_kpa;
