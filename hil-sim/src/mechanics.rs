@@ -183,38 +183,19 @@ fn distinct_sorted(values: impl Iterator<Item = f64>) -> Vec<f64> {
 /// ([`CurveMechanics`]); further out the nearest pressure's curve is held.
 pub const PRESSURE_EXTRAPOLATION_KPA: f64 = 1.0;
 
-/// [`bracket`] for p_air: beyond the outermost nodes the weight continues linearly (below 0
-/// or above 1) up to `reach` past the edge, then holds.
-fn pressure_bracket(nodes: &[f64], x: f64, reach: f64) -> (usize, f64) {
-    let n = nodes.len();
-    if n == 1 {
-        return (0, 0.0);
-    }
-    let x = x.clamp(nodes[0] - reach, nodes[n - 1] + reach);
-    let k = if x <= nodes[0] {
-        0
-    } else if x >= nodes[n - 1] {
-        n - 2
-    } else {
-        nodes.partition_point(|&v| v <= x).clamp(1, n - 1) - 1
-    };
-    (k, (x - nodes[k]) / (nodes[k + 1] - nodes[k]))
-}
-
-/// Index of the lower bracketing node and the weight of the upper one, clamped.
-fn bracket(nodes: &[f64], x: f64) -> (usize, f64, bool) {
+/// Index of the lower bracketing node and the weight of the upper one. Beyond the
+/// outermost nodes the weight continues linearly (below 0 or above 1) up to `reach` past
+/// the edge, then holds; the flag says x lay beyond that.
+fn bracket(nodes: &[f64], x: f64, reach: f64) -> (usize, f64, bool) {
     let n = nodes.len();
     if n == 1 {
         return (0, 0.0, false);
     }
-    if x <= nodes[0] {
-        return (0, 0.0, x < nodes[0]);
-    }
-    if x >= nodes[n - 1] {
-        return (n - 2, 1.0, x > nodes[n - 1]);
-    }
+    let (lo, hi) = (nodes[0] - reach, nodes[n - 1] + reach);
+    let clamped = x < lo || x > hi;
+    let x = x.clamp(lo, hi);
     let k = nodes.partition_point(|&v| v <= x).clamp(1, n - 1) - 1;
-    (k, (x - nodes[k]) / (nodes[k + 1] - nodes[k]), false)
+    (k, (x - nodes[k]) / (nodes[k + 1] - nodes[k]), clamped)
 }
 
 impl CurveMechanics {
@@ -271,8 +252,8 @@ impl CurveMechanics {
 
 impl MechanicsModel for CurveMechanics {
     fn contact(&self, h_mm: f64, pressure_kpa: f64, modulus_kpa: f64) -> ContactState {
-        let (im, wm, cm) = bracket(&self.ln_moduli, modulus_kpa.max(1e-9).ln());
-        let (ip, wp) = pressure_bracket(&self.pressures, pressure_kpa, PRESSURE_EXTRAPOLATION_KPA);
+        let (im, wm, cm) = bracket(&self.ln_moduli, modulus_kpa.max(1e-9).ln(), 0.0);
+        let (ip, wp, _) = bracket(&self.pressures, pressure_kpa, PRESSURE_EXTRAPOLATION_KPA);
         let nm = self.ln_moduli.len().min(im + 2);
         let np = self.pressures.len().min(ip + 2);
         let mut acc = [0.0f64; 4];

@@ -213,7 +213,8 @@ pub fn proximity_sweep(
             // only a fresh conversion is the load at this sample's stage position: the
             // samples between conversions (80 a second against 1000) repeat the last one,
             // up to 12.5 ms (12.5 um of travel) old, and fitted at their own positions they
-            // biased the load scale by +0.09 % at 15 kPa (0.02 % with fresh ones only)
+            // biased the load scale by +0.09 to +0.12 % at 15 kPa on hil-sim's bench (within
+            // 0.02 % with fresh ones only)
             let fresh = s.status.contains(StatusFlags::LOAD_FRESH);
             data.load_n
                 .push(s.load_counts.filter(|_| fresh).map(|c| units.load_n(c)));
