@@ -51,6 +51,16 @@ pub fn text(d: &Diagnosis) -> String {
                 p_text(q.p_value)
             );
         }
+        if c.p_value < level {
+            let _ = writeln!(
+                s,
+                "  and no single set of parameters fits both: PG = {:.1} with every parameter shared, 99 % of {} draws under the model below {:.1}, p {}",
+                c.statistic,
+                c.draws,
+                c.statistic_99,
+                p_text(c.p_value)
+            );
+        }
         let _ = writeln!(
             s,
             "  where: {}",
