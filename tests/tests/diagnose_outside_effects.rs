@@ -104,11 +104,15 @@ fn a_lens_distortion_is_unexplained_not_a_camera_scale() {
         text.contains("no effect of the library reconciles"),
         "{text}"
     );
-    // with every parameter shared the two parts fit no model either: PG beyond the draws'
-    // 99th percentile (measured 24-84 against 11-12 at K = 0.002 in three seeds of the
-    // outside study), and the report says so under the verdict
+    // with every parameter shared the two parts fit no model either, even with the tables'
+    // errors allowed (a camera scale has none, so PG_t is PG here): beyond the draws' 99th
+    // percentile (measured 24-84 against 11-12 at K = 0.002 in three seeds of the outside
+    // study), and the report says so under the verdict
     let level = diagnosis::consistency::test_level(c.parameters.len());
-    assert!(c.p_value < level && c.statistic > c.statistic_99, "{text}");
+    assert!(
+        c.tolerant_p_value < level && c.tolerant_statistic > c.tolerant_statistic_99,
+        "{text}"
+    );
     assert!(
         text.contains("no single set of parameters fits both"),
         "{text}"
