@@ -141,3 +141,43 @@ fn a_camera_scale_alone_keeps_the_channels_in_agreement() {
         .expect("loads with replicates");
     assert!(c.agree, "{text}");
 }
+
+#[test]
+fn a_leak_that_the_library_absorbs_only_with_different_parameters_per_channel_is_unexplained() {
+    // 0.6 kPa/s: the shell's true pressure falls along each indentation, by up to 1 kPa at
+    // the end of the travel. On seed 1 the selection absorbs it as a thinner sample, a
+    // camera scale and a manometer offset, whose moduli from the radius and from the load
+    // given the radius agree (z within +-1), but no single set of parameters fits both
+    // channels even with the tables' own errors allowed: PG_t came out at 25.1 against a
+    // 99th percentile of 13.0 of its drawn null distribution (PG 52.2 without the
+    // allowances; docs/results.md, "Diagnosis: effects outside the library")
+    let points = simulate(&SimSpec {
+        seed: 1,
+        ..spec(Some(Outside::PressureLeak { kpa_per_s: 0.6 }))
+    })
+    .expect("diagnosis test setup");
+    let d = diagnose_points(points, 1);
+    let text = diagnosis::report::text(&d);
+    assert_eq!(d.verdict.as_str(), "unexplained", "{text}");
+    assert!(d.effect.is_none() && d.effects.is_empty(), "{text}");
+    let c = d
+        .forward
+        .consistency
+        .as_ref()
+        .expect("loads with replicates");
+    assert!(!c.agree, "{text}");
+    // the whole model rejects it, not its modulus: the allowances only lower the statistic
+    // (PG_t <= PG), and PG_t is still above its draws' 99th percentile with p below the
+    // level
+    let level = diagnosis::consistency::test_level(c.parameters.len());
+    assert!(c.modulus_p_value >= level, "{text}");
+    assert!(c.tolerant_statistic <= c.statistic + 1e-9, "{text}");
+    assert!(
+        c.tolerant_p_value < level && c.tolerant_statistic > c.tolerant_statistic_99,
+        "{text}"
+    );
+    assert!(
+        text.contains("even with the tables' own errors allowed"),
+        "{text}"
+    );
+}
