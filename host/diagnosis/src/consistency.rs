@@ -49,7 +49,8 @@ use super::linalg;
 use super::load_channel::LoadChannel;
 use super::localisation::{self, Cell};
 use super::model::{Channel, Model};
-use super::noise_model::Whitener;
+use super::noise_model::{NoiseModel, Whitener};
+use super::offset_hold::{self, OffsetHold};
 use super::stats::{Gauss, normal_sf};
 
 /// Draws of the linearised null distribution of PG.
@@ -226,6 +227,10 @@ pub struct ChannelConsistency {
     /// Channel x pressure x depth windows of the residuals at the joint fit's parameters
     /// (flagged ones say where the model leaves the data).
     pub cells: Vec<Cell>,
+    /// With a pressure offset in the model: the offset read from the shallow and the deep
+    /// half of the travel (a part of the decision; [`crate::offset_hold`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub offset_hold: Option<OffsetHold>,
 }
 
 /// The model's prediction of both channels at parameters `q` (ln E2, then the included
@@ -413,17 +418,31 @@ fn tolerant_null_statistics(
 /// and, every parameter shared with the tables' errors allowed, on the whole model (PG_t),
 /// each test at P_REJECT / (number of tests) (Bonferroni: the chance that any of them
 /// rejects a right model stays below P_REJECT).
-fn agree(modulus_p_value: f64, tolerant_p_value: f64, parameters: &[ParameterAgreement]) -> bool {
-    let level = test_level(parameters.len());
+fn agree(
+    modulus_p_value: f64,
+    tolerant_p_value: f64,
+    parameters: &[ParameterAgreement],
+    offset_hold: Option<&OffsetHold>,
+) -> bool {
+    let level = test_level(parameters.len(), offset_hold.is_some());
     modulus_p_value >= level
         && tolerant_p_value >= level
         && parameters.iter().all(|q| q.p_value >= level)
+        && offset_hold.is_none_or(|h| h.p_value >= level)
 }
 
 /// The level of each of the check's tests with `parameters` effect parameters compared
-/// (the modulus, PG_t and each parameter).
-pub fn test_level(parameters: usize) -> f64 {
-    P_REJECT / (2 + parameters) as f64
+/// (the modulus, PG_t, each parameter and, with a pressure offset in the model, whether
+/// it holds over the travel).
+pub fn test_level(parameters: usize, offset_hold: bool) -> f64 {
+    P_REJECT / (2 + parameters + usize::from(offset_hold)) as f64
+}
+
+impl ChannelConsistency {
+    /// The level of each of this check's tests ([`test_level`]).
+    pub fn level(&self) -> f64 {
+        test_level(self.parameters.len(), self.offset_hold.is_some())
+    }
 }
 
 /// z and two-sided p of two moduli `(E2 in kPa, standard error of ln E2)` from independent
@@ -446,7 +465,7 @@ pub fn check(
     label: &str,
     points: &[Point],
     subset: &[usize],
-    radius: &Whitener,
+    (radius_noise, radius): (&NoiseModel, &Whitener),
     load: &LoadChannel,
     e0: f64,
     seed: u64,
@@ -566,6 +585,16 @@ pub fn check(
     let (mut cells, _, _) =
         localisation::a_channel(points, &radius.order(), &radius.whiten(&ra), &ra);
     cells.extend(localisation::load_channel(points, subset, &rp));
+    // a pressure offset read from the two halves of the travel (residuals outside the
+    // subset, NaN for the localisation, are not read)
+    let offset_hold = offset_hold::check(
+        model,
+        points,
+        subset,
+        (radius_noise, &load.noise),
+        (&ra, &rp),
+        whole.modulus_kpa,
+    );
     Some(ChannelConsistency {
         model: label.to_string(),
         radius_modulus_kpa: radius_part.modulus_kpa,
@@ -588,7 +617,12 @@ pub fn check(
         tolerant_statistic_99,
         tolerant_p_value,
         table_allowances: allowances,
-        agree: agree(modulus_p_value, tolerant_p_value, &parameters),
+        agree: agree(
+            modulus_p_value,
+            tolerant_p_value,
+            &parameters,
+            offset_hold.as_ref(),
+        ),
         parameters,
         joint_parameters: model
             .included
@@ -603,6 +637,7 @@ pub fn check(
             })
             .collect(),
         cells,
+        offset_hold,
     })
 }
 
@@ -656,25 +691,25 @@ mod tests {
         );
         assert!((thinner.allowance - 0.15499).abs() < 1e-5);
         assert!((thinner.z - 0.735).abs() < 1e-3, "z {}", thinner.z);
-        assert!(agree(0.5, 0.5, std::slice::from_ref(&thinner)));
+        assert!(agree(0.5, 0.5, std::slice::from_ref(&thinner), None));
         // a leak read as a thinner sample: 0.46 +- 0.135 mm from the radius, 2.0 +- 0.04
         // from the load: (0.46 - 2.0) / sqrt(0.135^2 + 0.04^2 + 0.1^2) = -1.54 / 0.17268
         // = -8.92
         let leak =
             ParameterAgreement::new("finite_thickness".into(), (0.46, 0.135), (2.0, 0.04), 0.05);
         assert!((leak.z + 8.918).abs() < 1e-3, "z {}", leak.z);
-        assert!(!agree(0.5, 0.5, std::slice::from_ref(&leak)));
+        assert!(!agree(0.5, 0.5, std::slice::from_ref(&leak), None));
         // Bonferroni: the modulus and PG_t alone run at 0.005 each; with one parameter
         // compared as well, at 0.01 / 3, so a modulus p of 0.004 (which rejects with no
         // parameter) passes
-        assert!((test_level(0) - 0.005).abs() < 1e-15);
-        assert!((test_level(1) - 0.01 / 3.0).abs() < 1e-15);
-        assert!(!agree(0.004, 0.5, &[]));
-        assert!(agree(0.004, 0.5, std::slice::from_ref(&thinner)));
+        assert!((test_level(0, false) - 0.005).abs() < 1e-15);
+        assert!((test_level(1, false) - 0.01 / 3.0).abs() < 1e-15);
+        assert!(!agree(0.004, 0.5, &[], None));
+        assert!(agree(0.004, 0.5, std::slice::from_ref(&thinner), None));
         // moduli that agree, but no shared parameters within the tables' errors: PG_t
         // beyond all but one of 2000 draws rejects the model
-        assert!(!agree(0.85, 2.0 / 2001.0, &[]));
-        assert!(agree(0.85, test_level(0), &[]));
+        assert!(!agree(0.85, 2.0 / 2001.0, &[], None));
+        assert!(agree(0.85, test_level(0, false), &[], None));
     }
 
     #[test]

@@ -990,7 +990,7 @@ fn search(
                     label,
                     points,
                     subset,
-                    whitener,
+                    (noise, whitener),
                     lc,
                     modulus_after_kpa,
                     options.seed,

@@ -31,6 +31,7 @@ pub mod load_channel;
 pub mod localisation;
 pub mod model;
 pub mod noise_model;
+pub mod offset_hold;
 pub mod report;
 pub mod selection;
 pub mod signatures;

@@ -39,7 +39,7 @@ pub fn text(d: &Diagnosis) -> String {
             p_text(c.modulus_p_value),
             c.load_modulus_kpa
         );
-        let level = super::consistency::test_level(c.parameters.len());
+        let level = c.level();
         for q in c.parameters.iter().filter(|q| q.p_value < level) {
             let _ = writeln!(
                 s,
@@ -60,6 +60,13 @@ pub fn text(d: &Diagnosis) -> String {
                 c.draws,
                 c.tolerant_statistic_99,
                 p_text(c.tolerant_p_value)
+            );
+        }
+        if let Some(h) = c.offset_hold.as_ref().filter(|h| h.p_value < level) {
+            let _ = writeln!(
+                s,
+                "  and the manometer offset does not hold over the travel: {} (a pressure that changes during the indentation, such as a leak, is not an offset)",
+                offset_hold_text(h)
             );
         }
         let _ = writeln!(
@@ -599,6 +606,26 @@ fn travel_text(s: &mut String, d: &Diagnosis) {
     }
 }
 
+/// A pressure offset read from the two halves of the travel.
+fn offset_hold_text(h: &super::offset_hold::OffsetHold) -> String {
+    let split: Vec<String> = h
+        .split_u_s_mm
+        .iter()
+        .map(|(p, u)| format!("{u:.2} mm at {p:.0} kPa"))
+        .collect();
+    format!(
+        "{:.3} +- {:.3} kPa above u_s {}, {:.3} +- {:.3} kPa below (both channels; allowance {:.3}): z = {:+.2}, p {}",
+        h.deep_kpa,
+        h.deep_se_kpa,
+        split.join(", "),
+        h.shallow_kpa,
+        h.shallow_se_kpa,
+        h.allowance_kpa,
+        h.z,
+        p_text(h.p_value)
+    )
+}
+
 /// Whether the radius and the load agree under the final model, and where they part.
 fn consistency_text(s: &mut String, d: &Diagnosis) {
     if let Some(c) = &d.forward.consistency {
@@ -620,7 +647,7 @@ fn consistency_text(s: &mut String, d: &Diagnosis) {
             },
             c.modulus_z,
             p_text(c.modulus_p_value),
-            if c.modulus_p_value >= super::consistency::test_level(c.parameters.len()) {
+            if c.modulus_p_value >= c.level() {
                 "they agree on the modulus"
             } else {
                 "they disagree on the modulus"
@@ -647,6 +674,13 @@ fn consistency_text(s: &mut String, d: &Diagnosis) {
                 q.allowance,
                 q.z,
                 p_text(q.p_value)
+            );
+        }
+        if let Some(h) = &c.offset_hold {
+            let _ = writeln!(
+                s,
+                "    pressure offset over the travel: {}",
+                offset_hold_text(h)
             );
         }
         for cell in c.cells.iter().filter(|c| c.flagged) {
