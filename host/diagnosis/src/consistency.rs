@@ -33,7 +33,9 @@
 //! part barely sees); p = (1 + #{PG* >= PG}) / (1 + N). PG itself is reported.
 //!
 //! The model is rejected when any of these tests (the modulus, PG_t, each compared
-//! parameter) gives p below [`P_REJECT`] divided by their number ([`test_level`]).
+//! parameter and, with a pressure offset in the model, whether the offset holds over the
+//! travel: [`crate::offset_hold`]) gives p below [`P_REJECT`] divided by their number
+//! ([`test_level`]).
 //!
 //! The report also gives the modulus of the load fitted alone by its own noise model, which
 //! is easier to read than the load given the radius. The check needs the load channel with
