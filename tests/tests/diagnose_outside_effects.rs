@@ -92,6 +92,44 @@ fn unexplained_by_the_channel_check(
     (c, text)
 }
 
+/// A leak of 0.6 kPa/s simulated with seed `seed` (the outside study's data), diagnosed
+/// with seed 1 as that study does: `unexplained` by the channel check.
+fn leak_of_0_6_kpa_per_s_unexplained(
+    seed: u64,
+) -> (diagnosis::consistency::ChannelConsistency, String) {
+    let points = simulate(&SimSpec {
+        seed,
+        ..spec(Some(Outside::PressureLeak { kpa_per_s: 0.6 }))
+    })
+    .expect("diagnosis test setup");
+    unexplained_by_the_channel_check(points, 1)
+}
+
+/// A library effect `kind` of `size` hidden in data of seed `seed` (diagnosed with the
+/// same seed): named first, with the radius and the load agreeing under the final model.
+fn named_with_the_channels_in_agreement(
+    kind: diagnosis::candidates::EffectKind,
+    size: f64,
+    seed: u64,
+) -> (diagnosis::consistency::ChannelConsistency, String) {
+    let points = simulate(&SimSpec {
+        hidden: Some(diagnosis::simulate::Hidden { kind, size }),
+        seed,
+        ..spec(None)
+    })
+    .expect("diagnosis test setup");
+    let d = diagnose_points(points, seed);
+    let text = diagnosis::report::text(&d);
+    assert_eq!(d.effect.as_deref(), Some(kind.name()), "{text}");
+    let c = d
+        .forward
+        .consistency
+        .clone()
+        .expect("loads with replicates");
+    assert!(c.agree, "{text}");
+    (c, text)
+}
+
 /// PG_t, the two channels' misfit with every parameter shared within the tables' errors,
 /// beyond its draws' 99th percentile with p below the check's level, and the report's line
 /// under the verdict saying so.
@@ -147,23 +185,7 @@ fn a_lens_distortion_is_unexplained_not_a_camera_scale() {
 fn a_camera_scale_alone_keeps_the_channels_in_agreement() {
     // the contrast: a true scale error of 3 % changes the radius only, in proportion, and
     // the model with radius_scale reconciles both channels
-    let points = simulate(&SimSpec {
-        hidden: Some(diagnosis::simulate::Hidden {
-            kind: diagnosis::candidates::EffectKind::RadiusScale,
-            size: 0.03,
-        }),
-        ..spec(None)
-    })
-    .expect("diagnosis test setup");
-    let d = diagnose_points(points, 11);
-    let text = diagnosis::report::text(&d);
-    assert_eq!(d.effect.as_deref(), Some("radius_scale"), "{text}");
-    let c = d
-        .forward
-        .consistency
-        .as_ref()
-        .expect("loads with replicates");
-    assert!(c.agree, "{text}");
+    named_with_the_channels_in_agreement(diagnosis::candidates::EffectKind::RadiusScale, 0.03, 11);
 }
 
 #[test]
@@ -175,12 +197,7 @@ fn a_leak_that_the_library_absorbs_only_with_different_parameters_per_channel_is
     // channels even with the tables' own errors allowed: PG_t came out at 25.1 against a
     // 99th percentile of 13.0 of its drawn null distribution (PG 52.2 without the
     // allowances; docs/results.md, "Diagnosis: effects outside the library")
-    let points = simulate(&SimSpec {
-        seed: 1,
-        ..spec(Some(Outside::PressureLeak { kpa_per_s: 0.6 }))
-    })
-    .expect("diagnosis test setup");
-    let (c, text) = unexplained_by_the_channel_check(points, 1);
+    let (c, text) = leak_of_0_6_kpa_per_s_unexplained(1);
     // the whole model rejects it, not its modulus: the allowances only lower the statistic
     // (PG_t <= PG), and PG_t is still above its draws' 99th percentile with p below the
     // level
@@ -198,12 +215,7 @@ fn a_leak_read_as_a_manometer_offset_is_unexplained_because_the_offset_does_not_
     // outside study). But a manometer offset is one number for the whole travel, and the
     // leak's pressure keeps falling: read from the deep half of each indentation the offset
     // came out at 1.15 +- 0.02 kPa, from the shallow half 0.55 +- 0.08
-    let points = simulate(&SimSpec {
-        seed: 2,
-        ..spec(Some(Outside::PressureLeak { kpa_per_s: 0.6 }))
-    })
-    .expect("diagnosis test setup");
-    let (c, text) = unexplained_by_the_channel_check(points, 1);
+    let (c, text) = leak_of_0_6_kpa_per_s_unexplained(2);
     let level = c.level();
     let hold = c
         .offset_hold
@@ -228,24 +240,11 @@ fn a_true_manometer_offset_holds_over_the_travel() {
     // the 6 and 15 kPa set points for the whole travel. The offset is named, and read from
     // either half of the travel it is the same (measured 1.96 +- 0.02 deep and 2.00, the
     // candidate's upper bound, shallow; 1.91-1.99 deep in three seeds)
-    let points = simulate(&SimSpec {
-        hidden: Some(diagnosis::simulate::Hidden {
-            kind: diagnosis::candidates::EffectKind::PressureOffset,
-            size: 2.0,
-        }),
-        seed: 1,
-        ..spec(None)
-    })
-    .expect("diagnosis test setup");
-    let d = diagnose_points(points, 1);
-    let text = diagnosis::report::text(&d);
-    assert_eq!(d.effect.as_deref(), Some("pressure_offset"), "{text}");
-    let c = d
-        .forward
-        .consistency
-        .as_ref()
-        .expect("loads with replicates");
-    assert!(c.agree, "{text}");
+    let (c, text) = named_with_the_channels_in_agreement(
+        diagnosis::candidates::EffectKind::PressureOffset,
+        2.0,
+        1,
+    );
     let hold = c
         .offset_hold
         .as_ref()
