@@ -712,6 +712,28 @@ mod tests {
         // beyond all but one of 2000 draws rejects the model
         assert!(!agree(0.85, 2.0 / 2001.0, &[], None));
         assert!(agree(0.85, test_level(0, false), &[], None));
+        // with a pressure offset in the model its hold over the travel is one more test
+        // (0.01 / 4 with one compared parameter), and a hold that fails rejects the model
+        // whatever the others say
+        assert!((test_level(1, true) - 0.01 / 4.0).abs() < 1e-15);
+        let hold = |p_value| OffsetHold {
+            split_u_s_mm: Vec::new(),
+            shallow_kpa: 0.55,
+            shallow_se_kpa: 0.08,
+            deep_kpa: 1.15,
+            deep_se_kpa: 0.02,
+            allowance_kpa: 0.115,
+            z: 4.25,
+            p_value,
+        };
+        let agreeing = std::slice::from_ref(&thinner);
+        assert!(!agree(0.5, 0.5, agreeing, Some(&hold(2e-5))));
+        assert!(!agree(0.5, 0.5, agreeing, Some(&hold(0.0024))));
+        assert!(agree(0.5, 0.5, agreeing, Some(&hold(0.0026))));
+        // ... and it lowers the others' level: a modulus p of 0.003 rejects at 0.01 / 3 but
+        // passes at 0.01 / 4
+        assert!(!agree(0.003, 0.5, agreeing, None));
+        assert!(agree(0.003, 0.5, agreeing, Some(&hold(0.5))));
     }
 
     #[test]

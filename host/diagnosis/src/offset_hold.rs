@@ -101,14 +101,21 @@ pub fn check(
         )?;
         Some((*f.included.get(j)?, *f.included_se.get(j)?))
     };
-    let (s, s_se) = read(&shallow)?;
-    let (d, d_se) = read(&deep)?;
+    Some(compare(split_u_s_mm, read(&shallow)?, read(&deep)?))
+}
+
+/// The comparison of the offsets `(value, se)` read from the shallow and the deep half.
+fn compare(
+    split_u_s_mm: Vec<(f64, f64)>,
+    (s, s_se): (f64, f64),
+    (d, d_se): (f64, f64),
+) -> OffsetHold {
     let allowance_kpa = HALF_ALLOWANCE * s.abs().max(d.abs());
     let z = (d - s)
         / (s_se * s_se + d_se * d_se + allowance_kpa * allowance_kpa)
             .sqrt()
             .max(1e-12);
-    Some(OffsetHold {
+    OffsetHold {
         split_u_s_mm,
         shallow_kpa: s,
         shallow_se_kpa: s_se,
@@ -117,7 +124,7 @@ pub fn check(
         allowance_kpa,
         z,
         p_value: 2.0 * normal_sf(z.abs()),
-    })
+    }
 }
 
 #[cfg(test)]
@@ -135,6 +142,26 @@ mod tests {
             h_mm: None,
             h_zero_fitted: false,
         }
+    }
+
+    #[test]
+    fn the_halves_are_compared_with_the_allowance_in_quadrature() {
+        // the leak of the outside study (seed 2): 0.553 +- 0.079 shallow, 1.151 +- 0.020
+        // deep; allowance 0.1 * 1.151 = 0.1151; z = 0.598 / sqrt(0.079^2 + 0.020^2 +
+        // 0.1151^2) = 0.598 / 0.14103 = 4.240, two-sided p = 2.2e-5
+        let leak = compare(Vec::new(), (0.553, 0.079), (1.151, 0.020));
+        assert!((leak.allowance_kpa - 0.1151).abs() < 1e-12);
+        assert!((leak.z - 4.240).abs() < 1e-3, "z {}", leak.z);
+        assert!(
+            (leak.p_value - 2.24e-5).abs() < 0.1e-5,
+            "p {}",
+            leak.p_value
+        );
+        // a true 2 kPa offset (a stale-calibration record): 1.958 +- 0.023 shallow, 1.962
+        // +- 0.008 deep; the allowance dominates: z = 0.004 / 0.1976 = 0.020
+        let offset = compare(Vec::new(), (1.958, 0.023), (1.962, 0.008));
+        assert!((offset.z - 0.0202).abs() < 1e-3, "z {}", offset.z);
+        assert!(offset.p_value > 0.98);
     }
 
     #[test]
