@@ -5,7 +5,9 @@
 //! only), `FEM_CHORD=N,Q` allows N of them per solve with contraction Q; `FEM_EDGE_BAND=1`
 //! solves with the band of fine elements at the contact edge (`FEM_FINER_BAND=1`: one
 //! refinement finer), `FEM_CONTACT_CURVATURE=0|1`
-//! leaves out or includes the master surface's curvature in the contact tangent.
+//! leaves out or includes the master surface's curvature in the contact tangent;
+//! `FEM_ANDERSON=N` mixes the chord iterations by Anderson acceleration of depth N
+//! (`Simulation::with_anderson_acceleration`, its depth replaced; `FEM_CHORD` after it).
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<f64> = std::env::args()
@@ -27,6 +29,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         sim = sim.with_finer_edge_band();
     } else if std::env::var_os("FEM_EDGE_BAND").is_some() {
         sim = sim.with_edge_band();
+    }
+    if let Ok(depth) = std::env::var("FEM_ANDERSON") {
+        sim = sim.with_anderson_acceleration();
+        sim.nonlinear_solver.anderson_depth = depth.parse()?;
     }
     if let Ok(v) = std::env::var("FEM_CONTACT_CURVATURE") {
         sim.linear_solver.contact_curvature_tangent = v != "0";

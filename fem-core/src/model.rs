@@ -12,6 +12,7 @@
 use std::sync::{Arc, OnceLock};
 
 use crate::FemError;
+use crate::anderson::AndersonHistory;
 use crate::contact::ContactPair;
 use crate::element::{self, ElementGeometry, ElementResult, ElementVector, Formulation};
 use crate::linear_solver::{SharedEntries, SymmetricSolver, UpperTriplets};
@@ -44,6 +45,9 @@ pub struct NewtonSettings {
     pub max_chord_iterations: usize,
     pub chord_contraction: f64,
     pub chord_below: f64,
+    /// Chord corrections mixed with up to this many earlier ones of the same factorisation
+    /// ([`crate::anderson`]; 0: plain chord iterations).
+    pub anderson_depth: usize,
     /// The contact tangent includes the master surface's curvature (exact Newton; copied
     /// to every `ContactPair::gap_curvature_tangent` when a solve starts).
     pub contact_curvature_tangent: bool,
@@ -67,6 +71,7 @@ impl Default for NewtonSettings {
             max_chord_iterations: 8,
             chord_contraction: 0.1,
             chord_below: 1e-2,
+            anderson_depth: 0,
             contact_curvature_tangent: true,
             stagnation_limit: usize::MAX,
             predict_multipliers: false,
@@ -854,6 +859,8 @@ impl Model {
         // residuals in a row near the solution that were not halved (see stagnation_limit)
         let mut stagnant = 0;
         let mut previous_norm = f64::INFINITY;
+        // the iterates and corrections since the last factorisation, for the chord steps
+        let mut history = AndersonHistory::new(self.newton.anderson_depth);
         while it < self.newton.max_iterations {
             let chord =
                 try_chord && chords < chord_limit && self.solver.has_factor(self.n_equations);
@@ -980,6 +987,13 @@ impl Model {
                 .map_err(NewtonFailure::Linear)?
             };
             self.solve_seconds += t0.elapsed().as_secs_f64();
+            if self.newton.anderson_depth > 0 {
+                // a factorised tangent starts a new history with its own Newton step
+                if !chord {
+                    history.restart();
+                }
+                du = history.step(self.restrict(u), du);
+            }
             let longest = du.iter().fold(0.0, |m: f64, x| m.max(x.abs()));
             if longest > self.newton.max_correction_mm {
                 let scale = self.newton.max_correction_mm / longest;

@@ -126,9 +126,15 @@ pub fn band_solver_description(grid: &LutGrid, solve: TableSolve) -> String {
     let simulation = |p: &CurveParams| solve.simulation(p);
     let base = simulation(&grid.curve_params(0));
     let newton = &base.nonlinear_solver;
+    // Anderson mixing of the chord iterations only when set (tables built before it
+    // existed keep their description)
+    let anderson = match newton.anderson_depth {
+        0 => String::new(),
+        depth => format!(", Anderson depth {depth}"),
+    };
     format!(
         "{FEM_CORE_SOLVER} with {:?}, Newton relative tolerance {:e}, stagnation \
-         limit {}, multiplier predictor {}, {}; {}",
+         limit {}, multiplier predictor {}{anderson}, {}; {}",
         base.solver_settings(),
         newton.relative_tolerance,
         newton.stagnation_limit,
