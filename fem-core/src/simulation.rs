@@ -366,7 +366,7 @@ impl Simulation {
     /// Chord iterations mixed by Anderson acceleration ([`crate::anderson`], depth
     /// [`ANDERSON_DEPTH`]), up to 16 of them per Newton solve, each kept while it at least
     /// halves the residual. For the band, whose inexact contact tangent makes the chord
-    /// iterations converge linearly: 5–21 % fewer factorisations on every curve measured,
+    /// iterations converge linearly: 4–20 % fewer factorisations on every curve measured,
     /// the same equilibria (docs/fem-verification.md). Not in [`Self::with_edge_band`]'s
     /// settings, with which the shipped tables were built.
     pub fn with_anderson_acceleration(mut self) -> Self {

@@ -74,7 +74,7 @@ pub struct CurveArgs {
     #[arg(long, requires = "edge_band")]
     pub finer: bool,
     /// Mix Newton's chord iterations by Anderson acceleration: the same curve (a within
-    /// 0.1 um where the band moves at the same steps) with 5-21 % fewer factorisations on
+    /// 0.1 um where the band moves at the same steps) with 4-20 % fewer factorisations on
     /// the band. The shipped tables were built without it.
     #[arg(long)]
     pub anderson: bool,
