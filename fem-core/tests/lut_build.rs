@@ -314,3 +314,38 @@ fn a_finer_table_solves_and_records_the_finer_band() {
         edge_band_solver_description(&grid)
     );
 }
+
+/// A table whose curves are solved with Newton's chord iterations mixed by Anderson
+/// acceleration (`tactile lut build --anderson`) records the mixing in its solver
+/// description, so it never passes for a table built without it, and holds the same
+/// curves: the mixing changes how Newton reaches each equilibrium, not the equilibria.
+#[test]
+fn a_table_built_with_anderson_mixing_records_it_and_holds_the_same_curves() {
+    use fem_core::lut::{TableSolve, build_fem_lut, build_fem_lut_with, describe_solver};
+    let base = CurveParams {
+        steps: 6,
+        max_depth_mm: 0.6,
+        mesh_level: -2,
+        ..Default::default()
+    };
+    let grid = LutGrid::with_axes("mixing", base, vec![200.0], vec![6.0]);
+    let mixed = |p: &CurveParams| TableSolve::Plain.simulation(p).with_anderson_acceleration();
+    let described = describe_solver(&grid, &mixed);
+    assert!(described.contains("Anderson depth 5"), "{described}");
+    assert!(
+        !fem_core::lut::edge_band_solver_description(&grid).contains("Anderson"),
+        "the band's default settings do not mix"
+    );
+    let quiet_stop = |_: &CurveParams, _: &fem_core::FemError| {};
+    let with = build_fem_lut_with(&grid, None, &mixed, &quiet_stop, &quiet).unwrap();
+    let without = build_fem_lut(&grid, None, TableSolve::Plain, &quiet_stop, &quiet).unwrap();
+    assert_eq!(with.solver, described);
+    assert_eq!(with.edge_band, None);
+    let (a, b) = (with.curve(0).unwrap(), without.curve(0).unwrap());
+    assert_eq!(a.len(), b.len());
+    // Newton stops at a relative residual of 1e-9 either way: far below a micrometre
+    for k in 0..a.len() {
+        assert!((a.a_mm[k] - b.a_mm[k]).abs() < 1e-5, "step {k}: a");
+        assert!((a.u_s_mm[k] - b.u_s_mm[k]).abs() < 1e-6, "step {k}: u_s");
+    }
+}

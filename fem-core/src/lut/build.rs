@@ -91,26 +91,43 @@ pub fn build_fem_lut(
                 on_curve,
             )
         }
-        TableSolve::EdgeBand | TableSolve::FinerEdgeBand => {
-            let solver = |p: &CurveParams| {
-                let solution = solve.simulation(p).solve()?;
-                if let crate::StopReason::Stopped { error, .. } = &solution.stop {
-                    on_stop(p, error);
-                }
-                Ok::<_, crate::FemError>(solution.curve)
-            };
-            let description = band_solver_description(grid, solve);
-            let mut lut = build_lut(grid, shard, &solver, &description, on_curve)?;
-            lut.edge_band = solve
-                .simulation(&grid.curve_params(0))
-                .discretisation
-                .edge_band;
-            // the converged band's measured error; a finer table's own is not measured and
-            // records the same figure
-            lut.contact_radius_error = Some(crate::discretisation::EDGE_BAND);
-            Ok(lut)
-        }
+        TableSolve::EdgeBand | TableSolve::FinerEdgeBand => build_fem_lut_with(
+            grid,
+            shard,
+            &|p: &CurveParams| solve.simulation(p),
+            on_stop,
+            on_curve,
+        ),
     }
+}
+
+/// [`build_fem_lut`] with every curve solved by the simulation `simulation` makes of its
+/// parameters (e.g. a [`TableSolve`]'s, with Newton's chord iterations mixed by
+/// [`crate::Simulation::with_anderson_acceleration`]). The table records its description
+/// ([`describe_solver`]) and, for the band, the band and its error estimate.
+pub fn build_fem_lut_with(
+    grid: &LutGrid,
+    shard: Option<Shard>,
+    simulation: &(dyn Fn(&CurveParams) -> crate::Simulation + Sync),
+    on_stop: &(dyn Fn(&CurveParams, &crate::FemError) + Sync),
+    on_curve: &(dyn Fn(&CurveReport) + Sync),
+) -> Result<Lut, LutError> {
+    let solver = |p: &CurveParams| {
+        let solution = simulation(p).solve()?;
+        if let crate::StopReason::Stopped { error, .. } = &solution.stop {
+            on_stop(p, error);
+        }
+        Ok::<_, crate::FemError>(solution.curve)
+    };
+    let description = describe_solver(grid, simulation);
+    let mut lut = build_lut(grid, shard, &solver, &description, on_curve)?;
+    lut.edge_band = simulation(&grid.curve_params(0)).discretisation.edge_band;
+    // the converged band's measured error; a finer table's own is not measured and
+    // records the same figure
+    if lut.edge_band.is_some() {
+        lut.contact_radius_error = Some(crate::discretisation::EDGE_BAND);
+    }
+    Ok(lut)
 }
 
 /// Description of fem-core's solver with the band of fine elements at the contact edge
@@ -123,7 +140,15 @@ pub fn edge_band_solver_description(grid: &LutGrid) -> String {
 /// [`edge_band_solver_description`] for either band ([`TableSolve::EdgeBand`] or
 /// [`TableSolve::FinerEdgeBand`]).
 pub fn band_solver_description(grid: &LutGrid, solve: TableSolve) -> String {
-    let simulation = |p: &CurveParams| solve.simulation(p);
+    describe_solver(grid, &|p: &CurveParams| solve.simulation(p))
+}
+
+/// The description a table built by [`build_fem_lut_with`] records: the settings of the
+/// grid's simulations (mesh, band, Newton and each pressure's linear solver).
+pub fn describe_solver(
+    grid: &LutGrid,
+    simulation: &(dyn Fn(&CurveParams) -> crate::Simulation + Sync),
+) -> String {
     let base = simulation(&grid.curve_params(0));
     let newton = &base.nonlinear_solver;
     // Anderson mixing of the chord iterations only when set (tables built before it
