@@ -4,16 +4,16 @@
 //! fixed-point iteration `x_{k+1} = x_k + f_k` with the correction `f_k = -K^{-1} R(x_k)`.
 //! Where `K` is not the exact Jacobian (the band's contact tangent leaves out the master
 //! surface's curvature), that iteration converges only linearly, the residual falling by a
-//! constant factor per step. Anderson's mixing (Anderson 1965; Walker & Ni 2011, SIAM J.
-//! Numer. Anal. 49, 1715, eqs. 2.1–2.2 and their "type II" form) keeps the last `m + 1`
-//! iterates and corrections, and steps from the combination of them whose correction is
-//! smallest:
+//! constant factor per step. Anderson's mixing (Anderson 1965, J. ACM 12, 547; in the form
+//! of Walker & Ni 2011, SIAM J. Numer. Anal. 49, 1715, their Algorithm AA written with
+//! differences) keeps the last `m + 1` iterates and corrections, and steps from the
+//! combination of them whose correction is smallest:
 //!
 //! `gamma = argmin |f_k - dF gamma|`,  `x_{k+1} = x_k + f_k - (dX + dF) gamma`,
 //!
 //! with `dF`, `dX` the differences of successive corrections and iterates. On a linear
 //! problem with an untruncated history this is GMRES preconditioned by `K` (Walker & Ni,
-//! theorem 2.2): the error that `K` leaves in a few directions (the nodes at the contact
+//! section 2): the error that `K` leaves in a few directions (the nodes at the contact
 //! edge) is removed in as many steps. All iterates of one history must share one `K`; the
 //! history is started again after each factorisation.
 //!
@@ -182,7 +182,7 @@ mod tests {
     }
 
     /// On a linear problem, untruncated Anderson mixing is GMRES with the fixed-point
-    /// map's preconditioner (Walker & Ni 2011, theorem 2.2): in exact arithmetic it solves
+    /// map's preconditioner (Walker & Ni 2011, section 2): in exact arithmetic it solves
     /// an n-dimensional system in n + 1 steps. The plain iteration (the same corrections,
     /// unmixed) is still far from the solution after as many.
     #[test]
