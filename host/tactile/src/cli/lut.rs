@@ -182,7 +182,8 @@ fn build(a: BuildArgs) -> ExitCode {
         .filter(|&i| shard.is_none_or(|s| s.contains(i)))
         .count();
     eprintln!(
-        "building {} curve(s) of grid {:?}{} (mesh level {}{}{}, {} steps to h = {} mm) on {} thread(s)",
+        "building {} curve(s) of grid {:?}{} (mesh level {}{}{}, {} steps to h = {} mm) \
+         on {} thread(s)",
         todo,
         grid.name,
         shard.map(|s| format!(", shard {s}")).unwrap_or_default(),
