@@ -7,7 +7,10 @@
 //! refinement finer), `FEM_CONTACT_CURVATURE=0|1`
 //! leaves out or includes the master surface's curvature in the contact tangent;
 //! `FEM_ANDERSON=N` mixes the chord iterations by Anderson acceleration of depth N
-//! (`Simulation::with_anderson_acceleration`, its depth replaced; `FEM_CHORD` after it).
+//! (`Simulation::with_anderson_acceleration`, its depth replaced; `FEM_CHORD` after it);
+//! the contact's settings: `FEM_PENALTY=F` replaces the penalty factor,
+//! `FEM_AUGMENTATIONS=N` the Uzawa augmentations per step and `FEM_PENETRATION_SCALE=S`
+//! multiplies the penetration tolerance that ends them.
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<f64> = std::env::args()
@@ -33,6 +36,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if let Ok(depth) = std::env::var("FEM_ANDERSON") {
         sim = sim.with_anderson_acceleration();
         sim.nonlinear_solver.anderson_depth = depth.parse()?;
+    }
+    if let Ok(f) = std::env::var("FEM_PENALTY") {
+        sim.discretisation.penalty_factor = f.parse()?;
+    }
+    if let Ok(n) = std::env::var("FEM_AUGMENTATIONS") {
+        sim.nonlinear_solver.augmentations = n.parse()?;
+    }
+    if let Ok(s) = std::env::var("FEM_PENETRATION_SCALE") {
+        sim.nonlinear_solver.penetration_tolerance_mm *= s.parse::<f64>()?;
     }
     if let Ok(v) = std::env::var("FEM_CONTACT_CURVATURE") {
         sim.linear_solver.contact_curvature_tangent = v != "0";

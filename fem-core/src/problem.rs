@@ -249,14 +249,20 @@ impl SolverSettings {
     }
 
     /// These settings with the mesh's band over `extent_mm` (see [`EdgeBand`]) and the
-    /// augmentation's penetration tolerance scaled to the band's element size.
+    /// augmentation's penetration tolerance scaled to the band's element size: the
+    /// tolerance set for the mesh's own fine size (by default 5e-4 of it) becomes the same
+    /// fraction of the band's, so that a tolerance set by the caller scales along.
     fn with_band(&self, band: &EdgeBand, extent_mm: [f64; 2]) -> Self {
         let mut s = self.clone();
         s.mesh.edge_window = Some(EdgeWindow {
             coarse_outside: band.coarse_outside,
             ..EdgeWindow::over(extent_mm, band.fine_size_mm, band.depth_size_mm)
         });
-        s.penetration_tolerance_mm = 5e-4 * band.fine_size_mm;
+        // as a ratio to the default, which is exactly 1 for the default tolerance: the
+        // band's default is then 5e-4 of its element size to the bit (the shipped tables)
+        let default_mm = 5e-4 * self.mesh.sample_fine_size_mm;
+        s.penetration_tolerance_mm =
+            self.penetration_tolerance_mm / default_mm * (5e-4 * band.fine_size_mm);
         s
     }
 }
@@ -1984,6 +1990,24 @@ fn restart_on_mesh(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The band's penetration tolerance is the caller's, scaled from the mesh's fine size
+    /// to the band's: the default stays 5e-4 of the band's element size to the bit (what
+    /// every band-built table was solved with), and a tolerance ten times the default
+    /// reaches the band ten times larger instead of being replaced.
+    #[test]
+    fn the_band_scales_the_callers_penetration_tolerance() {
+        let band = EdgeBand::CONVERGED;
+        let settings = SolverSettings::for_level(0);
+        let in_band = settings.with_band(&band, [1.0, 1.6]);
+        assert_eq!(in_band.penetration_tolerance_mm, 5e-4 * band.fine_size_mm);
+        let mut loose = settings.clone();
+        loose.penetration_tolerance_mm *= 10.0;
+        let ratio = loose.with_band(&band, [1.0, 1.6]).penetration_tolerance_mm
+            / in_band.penetration_tolerance_mm;
+        // one rounding of each product apart
+        assert!((ratio - 10.0).abs() < 1e-12, "{ratio}");
+    }
 
     /// `continuation` with at most 10 cuts, nothing to restore or commit and no path past a
     /// limit point.

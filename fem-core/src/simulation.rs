@@ -108,7 +108,9 @@ pub struct NonlinearSolver {
     pub max_correction: f64,
     /// Uzawa augmentations of the contact multipliers per load step.
     pub augmentations: usize,
-    /// Augmentation stops once the largest penetration is below this.
+    /// Augmentation stops once the largest penetration is below this (with a band,
+    /// [`Discretisation::edge_band`], scaled by the band's element size over the mesh's
+    /// fine size).
     pub penetration_tolerance_mm: f64,
     /// Newton's convergence test, ||R|| <= relative_tolerance * ||f_int|| (plus a tiny
     /// absolute term).

@@ -217,16 +217,27 @@ pub fn shipped_tables_dir() -> PathBuf {
 /// [`EffectAxis::table_solve`] says, in parallel on the rayon pool, and writes it to `out`;
 /// returns (sha256, failed curves). `on_curve` reports each curve. The shards merge with
 /// [`fem_core::lut::merge_shards`] into the table a single build writes, bit for bit.
+/// With `anderson`, Newton's chord iterations are mixed
+/// ([`fem_core::Simulation::with_anderson_acceleration`]: the same curves to the band's
+/// placement scatter, with fewer factorisations), and the table's solver description says
+/// so.
 pub fn build_effect_table(
     axis: EffectAxis,
     out: &Path,
     shard: Option<Shard>,
+    anderson: bool,
     on_curve: &(dyn Fn(&fem_core::lut::CurveReport) + Sync),
 ) -> Result<(String, usize), fem_core::lut::LutError> {
     let grid = effect_grid(axis);
+    let solve = axis.table_solve();
     // curves that stop converging near the end of the travel (thin, soft samples) are kept
     // up to their last converged step (fem-core records them as truncated)
-    let lut = fem_core::lut::build_fem_lut(&grid, shard, axis.table_solve(), &|_, _| {}, on_curve)?;
+    let lut = if anderson {
+        let mixed = |p: &CurveParams| solve.simulation(p).with_anderson_acceleration();
+        fem_core::lut::build_fem_lut_with(&grid, shard, &mixed, &|_, _| {}, on_curve)?
+    } else {
+        fem_core::lut::build_fem_lut(&grid, shard, solve, &|_, _| {}, on_curve)?
+    };
     let hash = fem_core::lut::write_lut(out, &lut)?;
     Ok((hash, lut.failures().count()))
 }

@@ -122,6 +122,50 @@ fn a_bad_table_build_request_is_refused_before_any_solve() {
     }
 }
 
+/// `--anderson` reaches the effect tables' solver and is recorded in their description.
+/// A shard past the last curve (index % 10000 == 9999: none of the few hundred) builds
+/// the table's header without any solve, so the flag's wiring is checked in no time; the
+/// mixed curves themselves are checked against plain ones in fem-core's tests.
+#[test]
+fn anderson_mixing_is_recorded_in_the_built_effect_tables() {
+    let description = |anderson: bool| {
+        let dir = scratch(if anderson { "mixed" } else { "plain" });
+        let mut cmd = tactile();
+        cmd.arg("diagnose").arg("--build-tables").arg(&dir).args([
+            "--only",
+            "stiffening",
+            "--shard",
+            "9999/10000",
+        ]);
+        if anderson {
+            cmd.arg("--anderson");
+        }
+        let out = cmd.output().expect("run tactile");
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let file = fem_core::lut::read_lut(&dir.join("effects-stiffening.shard-9999-of-10000.lut"))
+            .expect("the written shard reads back");
+        assert!(file.lut.curves.is_empty());
+        file.lut.solver
+    };
+    let (plain, mixed) = (description(false), description(true));
+    assert!(!plain.contains("Anderson"), "{plain}");
+    assert!(mixed.contains("Anderson depth 5"), "{mixed}");
+    // the same mesh, band and Newton tolerance (only the chord iterations differ)
+    let discretisation = |d: &str| d.split(", stagnation limit").next().map(str::to_owned);
+    assert_eq!(discretisation(&mixed), discretisation(&plain));
+    // the flag belongs to --build-tables
+    let out = tactile()
+        .args(["diagnose", "--anderson", "curves.csv"])
+        .output()
+        .expect("run tactile");
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--build-tables"));
+}
+
 #[test]
 fn json_carries_the_documented_fields_and_names_a_camera_scale() {
     let dir = scratch("json");

@@ -60,6 +60,11 @@ pub struct DiagnoseArgs {
     /// the N shards into the table a single build writes, bit for bit.
     #[arg(long, value_name = "K/N")]
     pub shard: Option<String>,
+    /// With --build-tables: mix Newton's chord iterations by Anderson acceleration (as
+    /// `tactile lut build --anderson`), recorded in each table's solver description. The
+    /// shipped tables were built without it.
+    #[arg(long, requires = "build_tables")]
+    pub anderson: bool,
     /// Simulate hidden-effect data with hil-sim: EFFECT=SIZE (e.g. friction=0.4), several
     /// joined by commas (e.g. finite_thickness=1.5,displacement_offset=0.04), or none;
     /// also one effect outside the library: lens_distortion=K (1/mm^2, the image radius
@@ -429,7 +434,7 @@ fn build_tables(dir: &Path, args: &DiagnoseArgs) -> ExitCode {
             );
         };
         let start = Instant::now();
-        match build_effect_table(axis, &out, shard, &report) {
+        match build_effect_table(axis, &out, shard, args.anderson, &report) {
             Ok((hash, failed)) => eprintln!(
                 "wrote {} (sha256:{hash}, {failed} failed curve(s)) in {:.1} s wall",
                 out.display(),
