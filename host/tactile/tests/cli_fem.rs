@@ -1,5 +1,6 @@
 //! `tactile fem curve` as a user runs it: Anderson mixing of Newton's chord iterations
-//! (`--anderson`) is recorded in the curve file and leaves the curve where it was.
+//! (`--anderson`) is recorded in the curve file and leaves the curve where it was, and the
+//! travel column reads as the nominal steps.
 
 #![allow(clippy::unwrap_used)] // tests may unwrap: a panic fails the test with its message
 
@@ -43,5 +44,22 @@ fn anderson_mixing_is_recorded_and_reaches_the_same_curve() {
         assert!((p.a_mm - m.a_mm).abs() < 1e-5, "h {:?}: a", p.h_mm);
         assert!((p.u_s_mm - m.u_s_mm).abs() < 1e-6, "h {:?}: u_s", p.h_mm);
     }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The travel column holds each step's nominal travel as written by hand (0.3, not the
+/// 0.30000000000000004 that summing 0.1 mm increments gives).
+#[test]
+fn the_travel_column_prints_the_nominal_steps() {
+    let dir = std::env::temp_dir().join(format!("tactile-cli-fem-h-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let text = std::fs::read_to_string(solve(&dir, "curve.csv", &[])).unwrap();
+    let mut lines = text.lines().filter(|l| !l.starts_with('#'));
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let column = header.iter().position(|&c| c == "h_mm").unwrap();
+    let travel: Vec<String> = lines
+        .map(|l| l.split(',').nth(column).unwrap().to_owned())
+        .collect();
+    assert_eq!(travel, ["0", "0.1", "0.2", "0.3", "0.4", "0.5", "0.6"]);
     std::fs::remove_dir_all(&dir).ok();
 }
