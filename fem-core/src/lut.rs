@@ -20,8 +20,9 @@ pub mod pressure_weights;
 pub mod table;
 
 pub use build::{
-    CurveReport, TableSolve, band_solver_description, build_fem_lut, build_fem_lut_with, build_lut,
-    describe_solver, edge_band_solver_description, fem_solver_description, solve_curve_for_table,
+    CurveReport, TableSolve, band_solver_description, build_fem_lut, build_fem_lut_mixed,
+    build_fem_lut_with, build_lut, describe_solver, edge_band_solver_description,
+    fem_solver_description, solve_curve_for_table,
 };
 pub use error::{LutError, TableDefect};
 pub use format::{

@@ -101,6 +101,25 @@ pub fn build_fem_lut(
     }
 }
 
+/// [`build_fem_lut`], with Newton's chord iterations mixed by
+/// [`crate::Simulation::with_anderson_acceleration`] if `anderson` (the table's description
+/// then says `Anderson depth 5`).
+pub fn build_fem_lut_mixed(
+    grid: &LutGrid,
+    shard: Option<Shard>,
+    solve: TableSolve,
+    anderson: bool,
+    on_stop: &(dyn Fn(&CurveParams, &crate::FemError) + Sync),
+    on_curve: &(dyn Fn(&CurveReport) + Sync),
+) -> Result<Lut, LutError> {
+    if anderson {
+        let mixed = |p: &CurveParams| solve.simulation(p).with_anderson_acceleration();
+        build_fem_lut_with(grid, shard, &mixed, on_stop, on_curve)
+    } else {
+        build_fem_lut(grid, shard, solve, on_stop, on_curve)
+    }
+}
+
 /// [`build_fem_lut`] with every curve solved by the simulation `simulation` makes of its
 /// parameters (e.g. a [`TableSolve`]'s, with Newton's chord iterations mixed by
 /// [`crate::Simulation::with_anderson_acceleration`]). The table records its description

@@ -229,15 +229,16 @@ pub fn build_effect_table(
     on_curve: &(dyn Fn(&fem_core::lut::CurveReport) + Sync),
 ) -> Result<(String, usize), fem_core::lut::LutError> {
     let grid = effect_grid(axis);
-    let solve = axis.table_solve();
     // curves that stop converging near the end of the travel (thin, soft samples) are kept
     // up to their last converged step (fem-core records them as truncated)
-    let lut = if anderson {
-        let mixed = |p: &CurveParams| solve.simulation(p).with_anderson_acceleration();
-        fem_core::lut::build_fem_lut_with(&grid, shard, &mixed, &|_, _| {}, on_curve)?
-    } else {
-        fem_core::lut::build_fem_lut(&grid, shard, solve, &|_, _| {}, on_curve)?
-    };
+    let lut = fem_core::lut::build_fem_lut_mixed(
+        &grid,
+        shard,
+        axis.table_solve(),
+        anderson,
+        &|_, _| {},
+        on_curve,
+    )?;
     let hash = fem_core::lut::write_lut(out, &lut)?;
     Ok((hash, lut.failures().count()))
 }

@@ -8,8 +8,8 @@
 
 use clap::{Args, Subcommand, ValueEnum};
 use fem_core::lut::{
-    CurveReport, LutFile, LutGrid, Shard, TableSolve, build_fem_lut, build_fem_lut_with,
-    merge_shards, read_lut, write_lut,
+    CurveReport, LutFile, LutGrid, Shard, TableSolve, build_fem_lut_mixed, merge_shards, read_lut,
+    write_lut,
 };
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -228,12 +228,7 @@ fn build(a: BuildArgs) -> ExitCode {
         (true, false) => TableSolve::EdgeBand,
         _ => TableSolve::Plain,
     };
-    let built = if a.anderson {
-        let mixed = |p: &fem_core::CurveParams| solve.simulation(p).with_anderson_acceleration();
-        build_fem_lut_with(&grid, shard, &mixed, &on_stop, &report)
-    } else {
-        build_fem_lut(&grid, shard, solve, &on_stop, &report)
-    };
+    let built = build_fem_lut_mixed(&grid, shard, solve, a.anderson, &on_stop, &report);
     let lut = match built {
         Ok(l) => l,
         Err(e) => return bad_input(e),
