@@ -1,5 +1,8 @@
 //! Trace the Newton work of one curve: per stage-2 step attempt the residual histories of
-//! its Newton solves (first solve, then one per contact augmentation), and the totals.
+//! its Newton solves (first solve, then one per contact augmentation), each residual
+//! followed by the contact set's change at that assembly (`3e-2(+1-2)`: one slave point
+//! came into contact, two left it; `fem_core::contact_set`), and the totals, with how many
+//! assemblies of the converged solves came before the set's last change.
 //! `cargo run -p fem-core --release --example solver_trace -- [modulus_kpa] [pressure_kpa]
 //! [mesh_level] [friction] [steps] [depth_mm]`; `FEM_CHORD=0` disables the chord iterations (full Newton
 //! only), `FEM_CHORD=N,Q` allows N of them per solve with contraction Q; `FEM_EDGE_BAND=1`
@@ -67,16 +70,30 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let seconds = started.elapsed().as_secs_f64();
     let verbose = std::env::var_os("FEM_TRACE_QUIET").is_none();
     let mut per_step = std::collections::BTreeMap::<String, usize>::new();
+    let mut settling = Settling::default();
     for a in &ind.attempts {
         let its: Vec<usize> = a.solves.iter().map(|h| h.len()).collect();
         *per_step.entry(format!("{:.4}", a.h_mm)).or_default() += its.iter().sum::<usize>();
+        for (solve, changes) in a.solves.iter().zip(&a.contact_changes) {
+            settling.add(solve, changes, a.converged);
+        }
         if verbose {
+            // each residual, and after it how the contact set changed at that assembly
+            // (+points that entered / -points that left)
             let hist: Vec<String> = a
                 .solves
                 .iter()
-                .map(|h| {
+                .zip(&a.contact_changes)
+                .map(|(h, changes)| {
                     h.iter()
-                        .map(|r| format!("{r:.0e}"))
+                        .zip(changes)
+                        .map(|(r, c)| {
+                            if c.changed() {
+                                format!("{r:.0e}(+{}-{})", c.entered, c.left)
+                            } else {
+                                format!("{r:.0e}")
+                            }
+                        })
                         .collect::<Vec<_>>()
                         .join(" ")
                 })
@@ -123,6 +140,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "band: {} moves, {} failed transfers, {} restarts from the start on the moved mesh",
         ind.band_moves, ind.band_move_failures, ind.band_restarts
     );
+    settling.print();
     println!("curve solve {seconds:.3} s");
     if std::env::var_os("FEM_TRACE_POINTS").is_some() {
         for p in &curve.points {
@@ -133,4 +151,81 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
     }
     Ok(())
+}
+
+/// Where the Newton work of the converged step attempts goes: the assemblies of each
+/// solve up to the last one at which the contact set changed (the set settling), and
+/// those after it (the contact set fixed).
+#[derive(Default)]
+struct Settling {
+    solves: usize,
+    assemblies: usize,
+    settling: usize,
+    changes: usize,
+    points_changed: usize,
+    farthest_mm: Vec<f64>,
+    tail: Vec<f64>,
+}
+
+impl Settling {
+    fn add(
+        &mut self,
+        residuals: &[f64],
+        changes: &[fem_core::contact_set::ContactSetChange],
+        ok: bool,
+    ) {
+        if !ok {
+            return;
+        }
+        self.solves += 1;
+        self.assemblies += residuals.len();
+        // the first entry compares with the solve before (the step's predictor or the
+        // multipliers' update); the settling is what changes from the second on
+        let last = changes
+            .iter()
+            .enumerate()
+            .skip(1)
+            .rfind(|(_, c)| c.changed())
+            .map_or(1, |(i, _)| i + 1);
+        self.settling += last;
+        for c in changes.iter().skip(1).filter(|c| c.changed()) {
+            self.changes += 1;
+            self.points_changed += c.entered + c.left;
+            self.farthest_mm.push(c.farthest_from_edge_mm);
+        }
+        // the residual at which the set last changed: Newton's quadratic tail starts there
+        if let Some(&r) = residuals.get(last - 1) {
+            self.tail.push(r);
+        }
+    }
+
+    fn print(&mut self) {
+        let quantile = |v: &mut Vec<f64>, q: f64| {
+            v.sort_by(f64::total_cmp);
+            v.get(((v.len() as f64 - 1.0) * q).round() as usize)
+                .copied()
+                .unwrap_or(f64::NAN)
+        };
+        let median_tail = quantile(&mut self.tail, 0.5);
+        let (p50, p95, max) = (
+            quantile(&mut self.farthest_mm, 0.5),
+            quantile(&mut self.farthest_mm, 0.95),
+            quantile(&mut self.farthest_mm, 1.0),
+        );
+        println!(
+            "contact set in the {} converged solves: {} of {} assemblies up to the last change \
+             of the set ({} assemblies changed it, {} points in all; farthest from the edge: \
+             median {:.1} um, 95 % {:.1} um, largest {:.1} um); median residual at the last \
+             change {:.0e}",
+            self.solves,
+            self.settling,
+            self.assemblies,
+            self.changes,
+            self.points_changed,
+            1e3 * p50,
+            1e3 * p95,
+            1e3 * max,
+            median_tail
+        );
+    }
 }

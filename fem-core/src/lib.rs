@@ -4,14 +4,17 @@
 //! Solver modules, one concept each: [`shape`] (Q9 basis, Gauss rule), [`mesh`] (mapped
 //! structured meshes), [`material`] (neo-Hookean / linear in mixed u–p form), [`element`]
 //! (Q9/P1 condensed mixed element), [`pressure_load`] (follower pressure), [`contact`]
-//! (node-to-segment augmented-Lagrangian contact), [`contact_edge`] (the contact radius), [`linear_solver`] (faer sparse Cholesky),
-//! [`model`] (assembly and Newton–Raphson), [`anderson`] (mixing of its chord iterations),
-//! [`problem`] (the paper's two-stage indentation), [`simulation`] (the grouped parameters
-//! and the one entry point, [`Simulation::solve`]).
+//! (node-to-segment augmented-Lagrangian contact), [`contact_edge`] (the contact radius),
+//! [`contact_set`] (how Newton's iterations change the points in contact),
+//! [`linear_solver`] (faer sparse Cholesky), [`model`] (assembly and Newton–Raphson),
+//! [`anderson`] (mixing of its chord iterations), [`problem`] (the paper's two-stage
+//! indentation), [`simulation`] (the grouped parameters and the one entry point,
+//! [`Simulation::solve`]).
 
 pub mod anderson;
 pub mod contact;
 pub mod contact_edge;
+pub mod contact_set;
 pub mod curve;
 pub mod discretisation;
 pub mod edge_band;

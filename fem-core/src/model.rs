@@ -14,6 +14,7 @@ use std::sync::{Arc, OnceLock};
 use crate::FemError;
 use crate::anderson::AndersonHistory;
 use crate::contact::ContactPair;
+use crate::contact_set::{ActivePoint, ContactSetChange};
 use crate::element::{self, ElementGeometry, ElementResult, ElementVector, Formulation};
 use crate::linear_solver::{SharedEntries, SymmetricSolver, UpperTriplets};
 use crate::material::{Material, MaterialLaw};
@@ -116,6 +117,8 @@ pub struct Assembly {
     pub min_jacobian: f64,
     /// Euclidean norm of the internal forces over all dofs (convergence reference).
     pub force_scale: f64,
+    /// The slave points that carry a contact force in this state.
+    pub active_contact: Vec<ActivePoint>,
 }
 
 /// The discretised problem.
@@ -180,6 +183,10 @@ pub struct SolverStats {
     /// Relative residual norms (norm / reference force) of the last Newton solve, one per
     /// assembly.
     pub last_history: Vec<f64>,
+    /// The contact set's change at each of those assemblies.
+    pub last_contact_changes: Vec<ContactSetChange>,
+    /// The contact set of the model's last assembly (what the next change is counted from).
+    pub last_contact_set: Vec<ActivePoint>,
 }
 
 impl SolverStats {
@@ -583,9 +590,15 @@ impl Model {
                 }
             }
         }
-        for contact in &self.contacts {
+        for (pair, contact) in self.contacts.iter().enumerate() {
             let pos = |n: usize| self.position(u, n);
             for term in contact.active_terms(&pos, with_tangent) {
+                let radius = contact.point_position(term.slave_index, &pos)[0];
+                asm.active_contact.push(ActivePoint {
+                    pair,
+                    point: term.slave_index,
+                    radius_mm: radius,
+                });
                 let n = 2 * term.nodes.len();
                 let dofs: Vec<usize> = (0..n).map(|k| 2 * term.nodes[k / 2] + k % 2).collect();
                 for a in 0..n {
@@ -831,6 +844,7 @@ impl Model {
     ) -> Result<usize, NewtonFailure> {
         self.stats.newton_solves += 1;
         self.stats.last_history.clear();
+        self.stats.last_contact_changes.clear();
         let result = self.newton(u, p_kpa, continuing);
         if result.is_err() {
             self.stats.failed_solves += 1;
@@ -899,6 +913,13 @@ impl Model {
             let reference = asm.force_scale;
             last = (norm, reference);
             self.stats.last_history.push(norm / reference);
+            self.stats
+                .last_contact_changes
+                .push(ContactSetChange::between(
+                    &self.stats.last_contact_set,
+                    &asm.active_contact,
+                ));
+            self.stats.last_contact_set = asm.active_contact;
             if !norm.is_finite() {
                 break;
             }

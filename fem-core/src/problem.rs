@@ -20,6 +20,7 @@ use std::time::Instant;
 use crate::FemError;
 use crate::contact::ContactPair;
 use crate::contact_edge::contact_edge_mm;
+use crate::contact_set::ContactSetChange;
 use crate::curve::{ContactPressureSample, Curve, CurveParams, CurvePoint};
 use crate::edge_band::{EdgeBand, GridBlock, interpolate_linear, transfer_block};
 use crate::element::Formulation;
@@ -474,7 +475,10 @@ pub struct Indentation {
 pub struct StepAttempt {
     pub h_mm: f64,
     pub converged: bool,
+    /// Per Newton solve of the attempt, its relative residuals (one per assembly).
     pub solves: Vec<Vec<f64>>,
+    /// Per Newton solve, the contact set's change at each of those assemblies.
+    pub contact_changes: Vec<Vec<ContactSetChange>>,
 }
 
 impl Indentation {
@@ -717,6 +721,7 @@ impl Indentation {
             h_mm,
             converged: false,
             solves: Vec::new(),
+            contact_changes: Vec::new(),
         });
         let result = self.solve_step_inner(u, h_mm, p_kpa, settings);
         if let Some(a) = self.attempts.last_mut() {
@@ -739,6 +744,8 @@ impl Indentation {
         };
         if let Some(a) = self.attempts.last_mut() {
             a.solves.push(self.model.stats.last_history.clone());
+            a.contact_changes
+                .push(self.model.stats.last_contact_changes.clone());
         }
         result
     }
