@@ -713,6 +713,7 @@ impl Model {
     ) -> Result<usize, NewtonFailure> {
         self.stats.newton_solves += 1;
         self.stats.last_history.clear();
+        self.stats.last_contact_changes.clear();
         self.sync_contact_tangent();
         let set_lambda = |model: &mut Self, lambda: f64| {
             for &(d, coef) in load_dofs {
@@ -743,6 +744,7 @@ impl Model {
             let reference = asm.force_scale;
             last = (norm, reference);
             self.stats.last_history.push(norm / reference);
+            self.record_contact_set(&asm.active_contact);
             let c = constraint.iter().map(|&(d, w)| w * u[d]).sum::<f64>()
                 + constraint_lambda * *lambda
                 - target;
@@ -826,6 +828,14 @@ impl Model {
             residual: last.0,
             reference: last.1,
         })
+    }
+
+    /// Log the contact set of an assembly of the present Newton solve: its change from the
+    /// assembly before ([`SolverStats::last_contact_changes`]).
+    fn record_contact_set(&mut self, active: &[ActivePoint]) {
+        let change = ContactSetChange::between(&self.stats.last_contact_set, active);
+        self.stats.last_contact_changes.push(change);
+        self.stats.last_contact_set = active.to_vec();
     }
 
     /// The contact pairs assemble the tangent [`NewtonSettings::contact_curvature_tangent`]
@@ -913,13 +923,7 @@ impl Model {
             let reference = asm.force_scale;
             last = (norm, reference);
             self.stats.last_history.push(norm / reference);
-            self.stats
-                .last_contact_changes
-                .push(ContactSetChange::between(
-                    &self.stats.last_contact_set,
-                    &asm.active_contact,
-                ));
-            self.stats.last_contact_set = asm.active_contact;
+            self.record_contact_set(&asm.active_contact);
             if !norm.is_finite() {
                 break;
             }
